@@ -1,0 +1,1 @@
+"""IRB 1600 description: URDF, parameters, kinematics, dynamics, friction (no ROS imports)."""

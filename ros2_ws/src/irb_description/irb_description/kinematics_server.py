@@ -1,0 +1,66 @@
+"""`ros2 run irb_description kinematics_server`: serve inverse kinematics (SolveIk).
+
+Thin adapter over ``RobotModel.ik``: points in, joint angles out, per-point reachability.
+"""
+from __future__ import annotations
+
+import numpy as np
+import rclpy
+from irb_interfaces.srv import SolveIk
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from .model import RobotModel, UnreachableError
+
+
+class KinematicsServer(Node):
+    """Service ``solve_ik`` (irb_interfaces/srv/SolveIk)."""
+
+    def __init__(self):
+        super().__init__('kinematics_server')
+        self.declare_parameter('branch', 'elbow_up', _descriptor(
+            "IK elbow branch: 'elbow_up' (thesis) or 'elbow_down'"))
+        self.model = RobotModel.load()
+        self.srv = self.create_service(SolveIk, 'solve_ik', self.on_request)
+        self.get_logger().info(f'serving solve_ik for {self.model.joint_names}')
+
+    def on_request(self, request, response):
+        branch = self.get_parameter('branch').value
+        response.joint_names = self.model.joint_names
+        problems = []
+        for k, pt in enumerate(request.points):
+            try:
+                q = self.model.ik(np.array([pt.x, pt.y, pt.z]), branch)
+                ok = True
+            except UnreachableError as exc:
+                q = np.full(self.model.nq, np.nan)
+                ok = False
+                problems.append(f'point {k}: {exc}')
+            response.solutions.append(JointTrajectoryPoint(positions=q.tolist()))
+            response.reachable.append(ok)
+        response.success = not problems
+        response.message = ('; '.join(problems) if problems
+                            else f'{len(request.points)} points solved')
+        return response
+
+
+def _descriptor(text: str):
+    from rcl_interfaces.msg import ParameterDescriptor
+    return ParameterDescriptor(description=text)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = KinematicsServer()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

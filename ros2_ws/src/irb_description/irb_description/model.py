@@ -1,0 +1,176 @@
+"""The IRB 1600 model: pinocchio kinematics and dynamics of the simplified 3-DOF robot.
+
+``RobotModel`` is loaded once (frozen parameters) and keeps its own pinocchio ``Data`` as a
+workspace, so one instance must not be shared between threads (use ``copy()``).
+Joints 4-6 are locked at 0 (thesis eq. 3.1); the TCP is the flange origin (tool0) in that pose.
+Robot equation (eq. 3.10): M(q) qdd + C(q, qd) qd + g(q) + tau_f(qd) = tau. No ROS imports.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .friction import FrictionMap, nominal_friction_map
+from .params import Dynamics, Kinematics, load_dynamics, load_kinematics, urdf_path
+
+TCP_FRAME = 'tool0'
+N_ACTUATED = 3
+
+
+class UnreachableError(ValueError):
+    """A Cartesian point has no inverse-kinematics solution inside the joint limits."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Limits of the actuated joints, each (3,): position [rad], speed [rad/s], torque [N m]."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    torque: np.ndarray
+
+
+class RobotModel:
+    """Simplified IRB 1600 (3 actuated joints) with full six-joint kinematics available."""
+
+    def __init__(self, kinematics: Kinematics, dynamics: Dynamics, urdf: Path):
+        self.kinematics = kinematics
+        self.dynamics = dynamics
+        self.urdf = Path(urdf)
+        self.full = pin.buildModelFromUrdf(str(self.urdf))
+        locked = [self.full.getJointId(n) for n in kinematics.joint_names[N_ACTUATED:]]
+        self.model = pin.buildReducedModel(self.full, locked, pin.neutral(self.full))
+        self.data = self.model.createData()
+        self._full_data = self.full.createData()
+        self._tcp = self.model.getFrameId(TCP_FRAME)
+        self.joint_names = list(kinematics.joint_names[:N_ACTUATED])
+        n = N_ACTUATED
+        self.limits = Limits(kinematics.lower[:n].copy(), kinematics.upper[:n].copy(),
+                             kinematics.velocity[:n].copy(), dynamics.torque_limit[:n].copy())
+        self.friction: FrictionMap = nominal_friction_map(dynamics.friction, self.joint_names)
+        # Geometry of the arm plane used by the closed-form IK (from the URDF joint origins).
+        j2, j3 = kinematics.joints[1].xyz, kinematics.joints[2].xyz
+        self._shoulder = np.array([j2[0], j2[2]])         # joint 2 (radial, height) [m]
+        self._a2 = float(np.linalg.norm(j3))              # upper arm, joint 2 -> 3 [m]
+        wrist = sum(j.xyz for j in kinematics.joints[3:]) + kinematics.tool0_xyz
+        self._l3 = float(np.linalg.norm(wrist))           # joint 3 -> TCP [m]
+
+    @classmethod
+    def load(cls) -> 'RobotModel':
+        """The model from irb_description's config/ and urdf/ (installed or source tree)."""
+        return cls(load_kinematics(), load_dynamics(), urdf_path())
+
+    def copy(self) -> 'RobotModel':
+        """Independent instance (own workspace) for another thread."""
+        return RobotModel(self.kinematics, self.dynamics, self.urdf)
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    # --- kinematics --------------------------------------------------------------------
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """TCP position (3,) [m] in base_link for joint angles q (3,) [rad]."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
+        return self.data.oMf[self._tcp].translation.copy()
+
+    def fk_full(self, q6: np.ndarray) -> np.ndarray:
+        """Pose (4, 4) of tool0 in base_link for all six joints q6 (6,) [rad]."""
+        pin.framesForwardKinematics(self.full, self._full_data, np.asarray(q6, float))
+        return self._full_data.oMf[self.full.getFrameId(TCP_FRAME)].homogeneous.copy()
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Linear TCP Jacobian (3, 3) [m/rad], d p / d q, in base_link axes."""
+        q = np.asarray(q, float)
+        J = pin.computeFrameJacobian(self.model, self.data, q, self._tcp,
+                                     pin.LOCAL_WORLD_ALIGNED)
+        return J[:3, :].copy()
+
+    def tcp_drift(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """dJ/dt qd (3,) [m/s^2]: TCP acceleration at joint speeds qd with zero qdd."""
+        q, qd = np.asarray(q, float), np.asarray(qd, float)
+        pin.forwardKinematics(self.model, self.data, q, qd, np.zeros(self.nq))
+        acc = pin.getFrameClassicalAcceleration(self.model, self.data, self._tcp,
+                                                pin.LOCAL_WORLD_ALIGNED)
+        return acc.linear.copy()
+
+    def ik(self, p: np.ndarray, branch: str = 'elbow_up', check_limits: bool = True
+           ) -> np.ndarray:
+        """Joint angles (3,) [rad] placing the TCP at p (3,) [m] (thesis §3.2).
+
+        q1 = atan2(y, x) (eq. 3.7); q3 from the law of cosines in the arm plane; q2 from the
+        resulting triangle. ``branch`` 'elbow_up' (the thesis's, q3 in [-pi/2, pi/2]) or
+        'elbow_down'. Raises UnreachableError outside the workspace or the joint limits.
+        """
+        p = np.asarray(p, float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise UnreachableError(f'point must be 3 finite numbers, got {p!r}')
+        x, y, z = p
+        q1 = np.arctan2(y, x)
+        r = np.hypot(x, y) - self._shoulder[0]
+        s = z - self._shoulder[1]
+        a2, l3 = self._a2, self._l3
+        k = (a2**2 + l3**2 - r**2 - s**2) / (2.0 * a2 * l3)   # = sin(q3)
+        if abs(k) > 1.0:
+            raise UnreachableError(
+                f'point {p.tolist()} is {np.hypot(r, s):.4f} m from joint 2, outside '
+                f'[{abs(a2 - l3):.4f}, {a2 + l3:.4f}] m')
+        if branch == 'elbow_up':
+            q3 = np.arcsin(k)
+        elif branch == 'elbow_down':
+            q3 = -np.pi - np.arcsin(k)
+        else:
+            raise ValueError(f"branch must be 'elbow_up' or 'elbow_down', not {branch!r}")
+        A = a2 - l3 * np.sin(q3)
+        B = l3 * np.cos(q3)
+        q2 = np.arctan2(A * r - B * s, B * r + A * s)
+        q = np.array([q1, q2, q3])
+        if check_limits:
+            bad = (q < self.limits.lower - 1e-12) | (q > self.limits.upper + 1e-12)
+            if np.any(bad):
+                names = [n for n, b in zip(self.joint_names, bad) if b]
+                raise UnreachableError(
+                    f'point {p.tolist()} needs {names} outside their limits '
+                    f'(q = {np.degrees(q).round(2).tolist()} deg)')
+        return q
+
+    # --- dynamics (no friction; see .friction) ------------------------------------------
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q) (3, 3) [kg m^2]."""
+        M = pin.crba(self.model, self.data, np.asarray(q, float))
+        return np.triu(M) + np.triu(M, 1).T
+
+    def coriolis(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """C(q, qd) qd (3,) [N m]."""
+        q, qd = np.asarray(q, float), np.asarray(qd, float)
+        return (pin.nonLinearEffects(self.model, self.data, q, qd)
+                - pin.computeGeneralizedGravity(self.model, self.data, q))
+
+    def coriolis_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """C(q, qd) (3, 3) [N m s/rad] (pinocchio's Christoffel-consistent choice)."""
+        return pin.computeCoriolisMatrix(self.model, self.data, np.asarray(q, float),
+                                         np.asarray(qd, float)).copy()
+
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        """g(q) (3,) [N m]."""
+        return pin.computeGeneralizedGravity(self.model, self.data, np.asarray(q, float)).copy()
+
+    def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """M qdd + C qd + g (3,) [N m] by RNEA, without friction."""
+        return pin.rnea(self.model, self.data, np.asarray(q, float), np.asarray(qd, float),
+                        np.asarray(qdd, float)).copy()
+
+    def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """qdd (3,) [rad/s^2] = M^-1 (tau - C qd - g) by ABA, tau without friction."""
+        return pin.aba(self.model, self.data, np.asarray(q, float), np.asarray(qd, float),
+                       np.asarray(tau, float)).copy()
+
+    def inverse_dynamics_with_friction(self, q, qd, qdd, friction: FrictionMap | None = None
+                                       ) -> np.ndarray:
+        """tau (3,) [N m] of eq. 3.10 with the nominal (or given) friction map."""
+        fm = friction or self.friction
+        return self.inverse_dynamics(q, qd, qdd) + fm.torque(np.asarray(qd, float))
