@@ -69,7 +69,8 @@ class CirclePath:
         """theta in [0, 2 pi) of the point(s) p (..., 3) [m], by atan2 about the centre (5.6)."""
         p = np.asarray(p, float)
         ang = np.arctan2(p[..., 1] - self.center[1], p[..., 0] - self.center[0])
-        return np.mod(self.direction * (ang - self.start_angle), 2.0 * np.pi)
+        theta = np.mod(self.direction * (ang - self.start_angle), 2.0 * np.pi)
+        return np.where(theta >= 2.0 * np.pi, 0.0, theta)   # mod gives 2 pi for -eps
 
 
 @dataclass(frozen=True)

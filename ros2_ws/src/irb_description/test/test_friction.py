@@ -1,0 +1,77 @@
+"""Friction maps: model, file schema, errors."""
+import casadi as ca
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from irb_description.friction import (FrictionMap, FrictionMapError, JointFriction,
+                                      load_friction_map)
+
+
+def test_nominal_map_follows_the_thesis_shape(model):
+    fm = model.friction
+    assert fm.joint_names == tuple(model.joint_names)
+    v = np.linspace(0.05, 2.0, 20)
+    tau = np.array([fm.torque(np.full(3, s)) for s in v])
+    assert np.all(np.diff(tau[5:], axis=0) > 0)          # viscous growth at higher speed
+    assert_allclose(fm.torque(-np.full(3, 0.7)), -fm.torque(np.full(3, 0.7)))
+    # joint 3 about half of joints 1-2 (thesis §4.4)
+    ratio = tau[:, 2] / tau[:, :2].mean(axis=1)
+    assert np.all((ratio > 0.35) & (ratio < 0.65))
+
+
+def test_parametric_formula():
+    j = JointFriction(coulomb=10.0, static=15.0, stribeck_velocity=0.1, viscous=2.0)
+    assert j.torque(0.0) == 0.0
+    assert j.torque(1e-9) == pytest.approx(15.0, rel=1e-6)
+    assert j.torque(0.1) == pytest.approx(10 + 5 * np.exp(-1) + 0.2)
+    assert j.torque(-3.0) == pytest.approx(-(10 + 6.0), rel=1e-9)
+
+
+def test_polynomials_used_inside_valid_range_only():
+    j = JointFriction(1.0, 1.0, 0.1, 1.0, valid_range=(0.1, 1.0),
+                      polynomial_positive=(5.0, 0.0), polynomial_negative=(-7.0,))
+    assert j.torque(0.5) == 5.0
+    assert j.torque(-0.5) == -7.0
+    assert j.torque(2.0) == pytest.approx(3.0)          # parametric outside the range
+
+
+def test_save_load_round_trip(tmp_path, model):
+    fm = FrictionMap(('joint_1', 'joint_2', 'joint_3'), tuple(
+        JointFriction(1.0 + i, 2.0 + i, 0.05, 3.0, (0.02, 2.0), (0.1, 0.2), (-0.1, 0.2),
+                      {'coulomb': 0.1}) for i in range(3)), 'test')
+    path = tmp_path / 'map.yaml'
+    fm.save(path)
+    back = load_friction_map(path, model.joint_names)
+    assert back == fm
+    v = np.array([0.3, -0.4, 1.5])
+    assert_allclose(back.torque(v), fm.torque(v))
+
+
+def test_casadi_torque_matches_numpy_away_from_zero(model):
+    v = ca.SX.sym('v', 3)
+    f = ca.Function('f', [v], [model.friction.casadi_torque(v, smoothing=1e-3)])
+    for s in (-1.3, -0.2, 0.05, 0.8):
+        x = np.array([s, -s, 0.5 * s])
+        assert_allclose(np.asarray(f(x)).ravel(), model.friction.torque(x), atol=1e-6)
+
+
+@pytest.mark.parametrize('text, reason', [
+    ('not: a map', 'not a friction map'),
+    ('friction_map: {version: 2, joints: {}}', 'version'),
+    ('friction_map: {joints: {joint_1: {coulomb: 1, viscous: 1}}}', 'no entry'),
+    ('friction_map: {joints: {joint_1: {coulomb: x, viscous: 1}, joint_2: {}, joint_3: {}}}',
+     'joint_1'),
+    ('[1, 2', 'unreadable'),
+    ('- 1\n- 2\n', 'mapping'),
+])
+def test_bad_files_give_clear_errors(tmp_path, model, text, reason):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    with pytest.raises(FrictionMapError, match=reason):
+        load_friction_map(path, model.joint_names)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(FrictionMapError, match='does not exist'):
+        load_friction_map(tmp_path / 'nope.yaml')
