@@ -115,5 +115,5 @@ if ! colcon build --symlink-install --event-handlers console_cohesion- summary+ 
   tail -n 40 "$ROOT/ros2_ws/build.log" >&2
   die "colcon build failed (full log: ros2_ws/build.log)"
 fi
-tail -n 2 "$ROOT/ros2_ws/build.log" | sed 's/^/[setup] /'
+grep -E "^Summary" "$ROOT/ros2_ws/build.log" | sed "s/^/[setup] /"
 log "done; run 'source scripts/env.sh' for a shell with the workspace sourced"

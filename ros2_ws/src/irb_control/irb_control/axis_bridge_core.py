@@ -1,0 +1,96 @@
+"""Bridge logic between the axis computer's UDP packets and ROS (no ROS, no sockets).
+
+``BridgeCore`` decides, for every datagram and every controller command, what the node does:
+publish a state, reply with a command, reject and count, or report link loss/recovery.
+Times are seconds of a monotonic clock supplied by the caller.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .axis_protocol import (CYCLE_S, MODE_TORQUE, CommandPacket, ProtocolError, StatePacket,
+                            decode_state, encode_command, seq_newer)
+
+
+@dataclass
+class BridgeStats:
+    """Counters of the bridge; ``rejected`` maps a reason to its count."""
+
+    states: int = 0             # valid state packets accepted and published
+    commands_sent: int = 0
+    late_commands: int = 0      # controller commands that arrived too late and were dropped
+    unanswered: int = 0         # accepted states that got no command before the next one
+    link_losses: int = 0
+    rejected: Counter = field(default_factory=Counter)   # size/magic/version/crc/nan/dup/stale
+
+
+class BridgeCore:
+    """State in, command out, with sequence checks and link supervision.
+
+    A command is sent only for the newest accepted state, and only while that state is younger
+    than ``max_command_age_s`` (one cycle by default): the bridge never sends a command older
+    than one cycle. States with a sequence number not newer than the last accepted one are
+    rejected as 'duplicate' (equal) or 'stale' (older).
+    """
+
+    def __init__(self, link_timeout_s: float = 0.1, max_command_age_s: float = CYCLE_S):
+        self.link_timeout_s = link_timeout_s
+        self.max_command_age_s = max_command_age_s
+        self.stats = BridgeStats()
+        self.last_state: StatePacket | None = None
+        self._last_state_time: float | None = None
+        self._answered = True
+        self.link_up = False
+
+    def on_datagram(self, data: bytes, now: float) -> tuple[StatePacket | None, str | None]:
+        """Validate a datagram. Returns (state to publish or None, link event or None).
+
+        The event is 'up' for the first valid state and 'recovered' after a loss.
+        """
+        try:
+            state = decode_state(data)
+        except ProtocolError as exc:
+            self.stats.rejected[exc.reason] += 1
+            return None, None
+        if self.last_state is not None and not seq_newer(state.seq, self.last_state.seq):
+            reason = 'duplicate' if state.seq == self.last_state.seq else 'stale'
+            self.stats.rejected[reason] += 1
+            return None, None
+        if not self._answered:
+            self.stats.unanswered += 1
+        event = None
+        if not self.link_up:
+            event = 'up' if self.stats.link_losses == 0 else 'recovered'
+            self.link_up = True
+        self.last_state, self._last_state_time, self._answered = state, now, False
+        self.stats.states += 1
+        return state, event
+
+    def on_command(self, tau_ref: np.ndarray, now: float, stamp_ns: int = 0) -> bytes | None:
+        """Controller command (6,) [N m] -> datagram for the newest state, or None if too late.
+
+        Non-finite torques are never sent (counted as rejected 'command_nan').
+        """
+        tau = np.asarray(tau_ref, float)
+        if tau.shape != (6,) or not np.all(np.isfinite(tau)):
+            self.stats.rejected['command_nan'] += 1
+            return None
+        if (self.last_state is None or self._answered
+                or now - self._last_state_time > self.max_command_age_s):
+            self.stats.late_commands += 1
+            return None
+        self._answered = True
+        self.stats.commands_sent += 1
+        return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE))
+
+    def check_link(self, now: float) -> str | None:
+        """'lost' once when no valid state arrived for ``link_timeout_s``, else None."""
+        if self.link_up and (self._last_state_time is None
+                             or now - self._last_state_time > self.link_timeout_s):
+            self.link_up = False
+            self.stats.link_losses += 1
+            return 'lost'
+        return None

@@ -1,0 +1,136 @@
+"""Axis-computer torque protocol, version 1: packet layout, encode, decode (no ROS imports).
+
+EGM-shaped UDP protocol with a torque payload (spec: doc/axis_protocol.md). The axis computer
+is the clock master: every 4.032 ms it sends a STATE packet; the external controller answers
+with a COMMAND packet carrying the same sequence number before the next cycle.
+All fields little-endian, fixed layout, CRC-32 (zlib) over everything before the CRC field.
+"""
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+VERSION = 1
+N_JOINTS = 6
+MAGIC_STATE = b'IRBS'
+MAGIC_COMMAND = b'IRBC'
+CYCLE_S = 0.004032
+
+# status.mode and command.mode_request
+MODE_IDLE = 0            # axis computer runs its own position control (motors may be on)
+MODE_TORQUE = 1          # external torque references are applied
+MODE_NAMES = {MODE_IDLE: 'idle', MODE_TORQUE: 'torque'}
+
+# status.error bit flags (latched by the axis computer until reset)
+ERR_NONE = 0
+ERR_COMM_TIMEOUT = 1 << 0      # too many cycles without a valid command: brakes engaged
+ERR_BAD_COMMAND = 1 << 1       # a command was malformed or not finite
+ERR_TORQUE_LIMIT = 1 << 2      # a command exceeded the axis computer's torque limit
+
+_HEADER = struct.Struct('<4sHHIIQ')   # magic, version, size, seq, reserved (0), time [ns]
+_STATE_BODY = struct.Struct(f'<{3 * N_JOINTS}dBBH')  # q, qd, tau, motors_on, mode, error
+_COMMAND_BODY = struct.Struct(f'<{N_JOINTS}dBBH')    # tau_ref, mode_request, reset, reserved
+_CRC = struct.Struct('<I')
+STATE_SIZE = _HEADER.size + _STATE_BODY.size + _CRC.size
+COMMAND_SIZE = _HEADER.size + _COMMAND_BODY.size + _CRC.size
+
+
+class ProtocolError(ValueError):
+    """A datagram is not a valid packet; ``reason`` is a short machine-readable key."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f'{reason}: {detail}')
+        self.reason = reason
+
+
+@dataclass
+class StatePacket:
+    """Axis computer -> controller. Arrays (6,): q [rad], qd [rad/s], tau [N m] measured."""
+
+    seq: int
+    stamp_ns: int
+    q: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    qd: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    tau: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    motors_on: bool = True
+    mode: int = MODE_TORQUE
+    error: int = ERR_NONE
+
+
+@dataclass
+class CommandPacket:
+    """Controller -> axis computer: torque reference (6,) [N m] for cycle ``seq``."""
+
+    seq: int
+    stamp_ns: int
+    tau_ref: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    mode_request: int = MODE_TORQUE
+    reset: bool = False
+
+
+def _finish(head_and_body: bytes) -> bytes:
+    return head_and_body + _CRC.pack(zlib.crc32(head_and_body))
+
+
+def encode_state(p: StatePacket) -> bytes:
+    """STATE_SIZE bytes for ``p``."""
+    body = _STATE_BODY.pack(*np.asarray(p.q, float), *np.asarray(p.qd, float),
+                            *np.asarray(p.tau, float), int(bool(p.motors_on)), int(p.mode),
+                            int(p.error))
+    return _finish(_HEADER.pack(MAGIC_STATE, VERSION, STATE_SIZE, p.seq & 0xFFFFFFFF, 0,
+                                p.stamp_ns) + body)
+
+
+def encode_command(c: CommandPacket) -> bytes:
+    """COMMAND_SIZE bytes for ``c``."""
+    body = _COMMAND_BODY.pack(*np.asarray(c.tau_ref, float), int(c.mode_request),
+                              int(bool(c.reset)), 0)
+    return _finish(_HEADER.pack(MAGIC_COMMAND, VERSION, COMMAND_SIZE, c.seq & 0xFFFFFFFF, 0,
+                                c.stamp_ns) + body)
+
+
+def _check(data: bytes, magic: bytes, size: int) -> tuple[int, int]:
+    if len(data) != size:
+        raise ProtocolError('size', f'{len(data)} bytes, expected {size}')
+    got_magic, version, declared, seq, _reserved, stamp = _HEADER.unpack_from(data)
+    if got_magic != magic:
+        raise ProtocolError('magic', f'{got_magic!r}, expected {magic!r}')
+    if version != VERSION:
+        raise ProtocolError('version', f'{version}, expected {VERSION}')
+    if declared != size:
+        raise ProtocolError('size', f'header says {declared} bytes, expected {size}')
+    (crc,) = _CRC.unpack_from(data, size - _CRC.size)
+    if crc != zlib.crc32(data[:size - _CRC.size]):
+        raise ProtocolError('crc', 'checksum mismatch')
+    return seq, stamp
+
+
+def decode_state(data: bytes) -> StatePacket:
+    """Parse and validate a STATE datagram; non-finite values raise ProtocolError('nan')."""
+    seq, stamp = _check(data, MAGIC_STATE, STATE_SIZE)
+    v = _STATE_BODY.unpack_from(data, _HEADER.size)
+    arr = np.array(v[:3 * N_JOINTS], float)
+    if not np.all(np.isfinite(arr)):
+        raise ProtocolError('nan', 'non-finite joint value in state')
+    n = N_JOINTS
+    return StatePacket(seq, stamp, arr[:n], arr[n:2 * n], arr[2 * n:], bool(v[-3]), v[-2],
+                       v[-1])
+
+
+def decode_command(data: bytes) -> CommandPacket:
+    """Parse and validate a COMMAND datagram; non-finite torques raise ProtocolError('nan')."""
+    seq, stamp = _check(data, MAGIC_COMMAND, COMMAND_SIZE)
+    v = _COMMAND_BODY.unpack_from(data, _HEADER.size)
+    tau = np.array(v[:N_JOINTS], float)
+    if not np.all(np.isfinite(tau)):
+        raise ProtocolError('nan', 'non-finite torque in command')
+    return CommandPacket(seq, stamp, tau, v[N_JOINTS], bool(v[N_JOINTS + 1]))
+
+
+def seq_newer(a: int, b: int) -> bool:
+    """True when sequence number ``a`` is after ``b`` (uint32 with wrap-around, RFC 1982)."""
+    diff = (a - b) & 0xFFFFFFFF
+    return 0 < diff < 0x80000000
