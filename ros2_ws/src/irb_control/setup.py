@@ -22,6 +22,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'simulator = irb_control.simulator_node:main',
+            'pdplus = irb_control.pdplus_node:main',
+            'axis_bridge = irb_control.axis_bridge_node:main',
+            'fake_axis_computer = irb_control.fake_axis_computer_node:main',
         ],
     },
 )

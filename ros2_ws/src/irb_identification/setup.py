@@ -22,6 +22,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'recorder = irb_identification.recorder_node:main',
+            'replay = irb_identification.replay_node:main',
+            'identify = irb_identification.identify:main',
+            'experiments = irb_identification.experiments:main',
         ],
     },
 )

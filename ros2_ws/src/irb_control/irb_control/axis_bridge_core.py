@@ -43,7 +43,12 @@ class BridgeCore:
         self.last_state: StatePacket | None = None
         self._last_state_time: float | None = None
         self._answered = True
+        self._reset_pending = False
         self.link_up = False
+
+    def request_reset(self) -> None:
+        """The next command sent carries reset = 1 (clears the axis computer's latched errors)."""
+        self._reset_pending = True
 
     def on_datagram(self, data: bytes, now: float) -> tuple[StatePacket | None, str | None]:
         """Validate a datagram. Returns (state to publish or None, link event or None).
@@ -84,7 +89,9 @@ class BridgeCore:
             return None
         self._answered = True
         self.stats.commands_sent += 1
-        return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE))
+        reset, self._reset_pending = self._reset_pending, False
+        return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE,
+                                            reset))
 
     def check_link(self, now: float) -> str | None:
         """'lost' once when no valid state arrived for ``link_timeout_s``, else None."""

@@ -126,3 +126,12 @@ def test_link_loss_and_recovery_are_reported_once():
     assert b.check_link(0.5) is None
     _, event = b.on_datagram(encode_state(state(2)), 0.6)
     assert event == 'recovered' and b.stats.link_losses == 1
+
+
+def test_reset_request_rides_on_the_next_command_only():
+    b = BridgeCore()
+    b.request_reset()
+    b.on_datagram(encode_state(state(1)), 0.0)
+    assert decode_command(b.on_command(np.zeros(6), 0.001)).reset
+    b.on_datagram(encode_state(state(2)), 0.004)
+    assert not decode_command(b.on_command(np.zeros(6), 0.005)).reset

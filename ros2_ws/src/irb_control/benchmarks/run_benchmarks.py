@@ -1,0 +1,289 @@
+#!/usr/bin/env python3
+"""Benchmarks of irb_control; each prints JSON and writes it (and plots) to results/.
+
+    python benchmarks/run_benchmarks.py loop      # simulator <-> pdplus, two processes, 248 Hz
+    python benchmarks/run_benchmarks.py accuracy  # path accuracy + energy, no/nominal/true FF
+    python benchmarks/run_benchmarks.py speed     # offline simulation speed
+    python benchmarks/run_benchmarks.py all
+
+Needs `source scripts/env.sh`; `loop` also ROS_DOMAIN_ID / ROS_AUTOMATIC_DISCOVERY_RANGE.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / 'results'
+MODES = ('none', 'nominal', 'file')
+MODE_LABEL = {'none': 'no FF', 'nominal': 'nominal FF', 'file': 'true-plant FF'}
+
+
+def _write(name: str, data: dict) -> None:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(data, indent=2)
+    (RESULTS / f'{name}.json').write_text(text)
+    print(text)
+
+
+# --- (1) loop timing ------------------------------------------------------------------------
+def _cpu_s(pid: int) -> float:
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def bench_loop(duration: float = 20.0) -> dict:
+    import rclpy
+    from irb_interfaces.msg import ControllerState
+    from rclpy.executors import SingleThreadedExecutor
+
+    from irb_control.node_util import state_qos
+    ns = f'/bench{os.getpid()}'
+    stats_path = RESULTS / 'loop_simulator_stats.json'
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    common = ['--ros-args', '-r', f'__ns:={ns}']
+    ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
+                             '-p', 'profile_duration_s:=10.0'],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
+                            '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}'],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    rclpy.init()
+    node = rclpy.create_node('bench_listener')
+    states = []
+    node.create_subscription(ControllerState, f'{ns}/controller_state', states.append,
+                             state_qos())
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    t_end = time.monotonic() + 60.0
+    while not states and time.monotonic() < t_end:
+        ex.spin_once(timeout_sec=0.1)
+    cpu0 = {'simulator': _cpu_s(sim.pid), 'pdplus': _cpu_s(ctrl.pid)}
+    n0 = len(states)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < duration:
+        ex.spin_once(timeout_sec=0.1)
+    cpu1 = {'simulator': _cpu_s(sim.pid), 'pdplus': _cpu_s(ctrl.pid)}
+    wall = time.monotonic() - t0
+    steps = max(len(states) - n0, 1)
+    for p in (sim, ctrl):           # simulator first: its statistics end while pdplus runs
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=30)
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    sim_stats = json.loads(stats_path.read_text())
+    dur = np.array([s.step_duration for s in states[n0:]]) * 1e3
+    modes = [int(s.mode) for s in states[n0:]]
+    expected_steps = wall / 0.004032
+    out = {
+        'benchmark': 'loop timing, simulator <-> pdplus, 2 processes, real time 248 Hz',
+        'listen_wall_s': round(wall, 2),
+        'state_to_command_latency_ms (simulator side)': sim_stats['latency_ms'],
+        'missed_deadlines (command not back before next tick)': sim_stats['missed_deadlines'],
+        'steps (simulator)': sim_stats['steps'],
+        'missed_fraction': sim_stats['missed_deadlines'] / max(sim_stats['steps'], 1),
+        'max_consecutive_missed': sim_stats['max_consecutive_missed'],
+        'pdplus_missed_deadlines_counter': int(states[-1].missed_deadlines) if states else None,
+        'pdplus_step_compute_ms': {'p50': float(np.percentile(dur, 50)),
+                                   'p99': float(np.percentile(dur, 99)),
+                                   'max': float(dur.max())},
+        'controller_states_received_fraction': steps / expected_steps,
+        'cpu_per_step_ms': {k: (cpu1[k] - cpu0[k]) / expected_steps * 1e3 for k in cpu0},
+        'modes_seen': sorted(set(modes)),
+        'goal': 'p99 < 1 ms, < 0.1 % missed, never 3 in a row',
+    }
+    _write('loop', out)
+    return out
+
+
+# --- (2)+(3) accuracy and energy --------------------------------------------------------------
+def _run(model, mode: str, traj=None, circle_duration: float = 10.0):
+    from irb_control.closed_loop import build_default, controller_friction, simulate_closed_loop
+    from irb_control.pd_plus import ControllerConfig, PdPlusController
+    from irb_control.plant import default_plant_yaml
+    plant, ctrl = build_default(mode, duration_s=circle_duration, model=model)
+    if traj is not None:
+        ctrl = PdPlusController(model, ctrl.path, ControllerConfig(),
+                                controller_friction(model, mode, default_plant_yaml()))
+        ctrl.set_time_trajectory(traj)
+        return simulate_closed_loop(plant, ctrl, traj.duration + 1.0)
+    return simulate_closed_loop(plant, ctrl, circle_duration + 3.0)
+
+
+def _stats(x: np.ndarray) -> dict:
+    return {'mean_mm': float(np.mean(x) * 1e3), 'rms_mm': float(np.sqrt(np.mean(x**2)) * 1e3),
+            'max_mm': float(np.max(x) * 1e3)}
+
+
+def bench_accuracy(plots: bool = True) -> dict:
+    from irb_description.model import RobotModel
+
+    from irb_control.closed_loop import polyline_distance
+    from irb_control.profiles import sine_trajectory
+    model = RobotModel.load()
+    out = {'benchmark': 'path accuracy and energy, offline closed loop',
+           'metrics': 'circle: camera point to nearest circle point; sine (time-driven): '
+                      'camera point to FK(q_ref) at the same time (primary) and to the '
+                      'nearest point of the reference curve; joint error = q_ref - q (true)',
+           'plant_friction': 'config/plant.yaml (differs from nominal)', 'circle': {},
+           'sine': {}}
+    figs = []
+    for T in (10.0, 15.0):
+        key = f'{T:g}s'
+        out['circle'][key] = {}
+        runs = {}
+        for mode in MODES:
+            r = _run(model, mode, circle_duration=T)
+            runs[mode] = r
+            e = r.path_error_camera()
+            je = r.joint_error()[r.motion_mask()]
+            out['circle'][key][mode] = {
+                'camera_path_error': _stats(e),
+                'joint_error_max_mrad': (np.nanmax(np.abs(je), axis=0) * 1e3).round(3).tolist(),
+                'joint_error_rms_mrad': (np.sqrt(np.nanmean(je**2, axis=0)) * 1e3).round(3)
+                .tolist(),
+                'energy_j': r.energy, 'motion_time_s': float(r.t[-1] - r.path_start_time()),
+                'stop_reason': r.stop_reason}
+        base = out['circle'][key]['none']['camera_path_error']['mean_mm']
+        for mode in ('nominal', 'file'):
+            m = out['circle'][key][mode]['camera_path_error']['mean_mm']
+            out['circle'][key][mode]['path_error_reduction_vs_none'] = 1 - m / base
+        figs.append((f'circle_{key}', runs))
+    q0 = None
+    for joint in range(3):
+        for v in (0.1, 0.5, 1.0):
+            key = f'joint{joint + 1}_{v:g}rad_s'
+            out['sine'][key] = {}
+            runs = {}
+            for mode in MODES:
+                if q0 is None:
+                    from irb_control.plant import PlantConfig
+                    q0 = np.array(PlantConfig().initial_q)
+                traj = sine_trajectory(q0, joint, v, amplitude=0.2, cycles=1.0)
+                r = _run(model, mode, traj=traj)
+                runs[mode] = r
+                ref_curve = np.array([model.fk(q) for q in traj.q[::2]])
+                sel = r.cam_t >= r.path_start_time()
+                e_near = polyline_distance(ref_curve, r.cam_p[sel])
+                e = _same_time_error(model, r, sel)
+                je = r.joint_error()[r.motion_mask()][:, joint]
+                out['sine'][key][mode] = {
+                    'camera_path_error': _stats(e),
+                    'camera_nearest_point_error': _stats(e_near),
+                    'joint_error_max_mrad': float(np.nanmax(np.abs(je)) * 1e3),
+                    'joint_error_rms_mrad': float(np.sqrt(np.nanmean(je**2)) * 1e3),
+                    'energy_j': r.energy, 'stop_reason': r.stop_reason}
+            base = out['sine'][key]['none']['camera_path_error']['mean_mm']
+            for mode in ('nominal', 'file'):
+                m = out['sine'][key][mode]['camera_path_error']['mean_mm']
+                out['sine'][key][mode]['path_error_reduction_vs_none'] = 1 - m / base
+            if v == 0.5:
+                figs.append((f'sine_{key}', runs))
+    if plots:
+        out['plots'] = [_plot(name, runs, model) for name, runs in figs]
+    _write('accuracy', out)
+    return out
+
+
+def _same_time_error(model, r, sel) -> np.ndarray:
+    """|camera point - FK(q_ref)| (M,) [m] at the camera times; q_ref logged at t_k is the
+    reference for t_k + n T (n = prediction samples)."""
+    m = r.motion_mask()
+    t_ref = r.t[m] + r.prediction_samples * 0.004032
+    tc = r.cam_t[sel]
+    ok = (tc >= t_ref[0]) & (tc <= t_ref[-1])
+    q = np.column_stack([np.interp(tc[ok], t_ref, r.q_ref[m][:, j]) for j in range(3)])
+    p_ref = np.array([model.fk(qi) for qi in q])
+    return np.linalg.norm(r.cam_p[sel][ok] - p_ref, axis=1)
+
+
+def _plot(name: str, runs: dict, model) -> str:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from irb_control.closed_loop import circle_distance
+    fig, axes = plt.subplots(len(runs), 2, figsize=(11, 2.6 * len(runs)), squeeze=False)
+    for row, (mode, r) in zip(axes, runs.items()):
+        t0 = r.path_start_time()
+        sel = r.cam_t >= t0
+        if name.startswith('circle'):
+            e = circle_distance(r.path, r.cam_p[sel])
+            tc = r.cam_t[sel]
+        else:
+            e = _same_time_error(model, r, sel)
+            tc = r.cam_t[sel][:len(e)]
+        row[0].plot(tc - t0, e * 1e3, lw=0.7)
+        row[0].set_ylabel('path error [mm]')
+        row[0].set_title(f'{MODE_LABEL[mode]}: camera, mean {np.mean(e) * 1e3:.3f} mm')
+        m = r.motion_mask()
+        je = r.joint_error()[m] * 1e3
+        for j in range(3):
+            row[1].plot(r.t[m] - t0, je[:, j], lw=0.7, label=f'joint {j + 1}')
+        row[1].set_ylabel('joint error [mrad]')
+        row[1].set_title(f'{MODE_LABEL[mode]}: encoders')
+        row[1].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel('time since start of motion [s]')
+    fig.suptitle(f'{name} (cf. thesis figs. 4.6-4.20)')
+    fig.tight_layout()
+    path = RESULTS / f'{name}.png'
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return str(path.relative_to(RESULTS.parent.parent))
+
+
+# --- (4) offline speed ------------------------------------------------------------------------
+def bench_speed() -> dict:
+    from irb_description.model import RobotModel
+
+    from irb_control.closed_loop import build_default, simulate_closed_loop
+    model = RobotModel.load()
+    plant, ctrl = build_default('nominal', duration_s=10.0, model=model)
+    t = time.perf_counter()
+    r = simulate_closed_loop(plant, ctrl, 10.5, stop_when_done=None)
+    closed = time.perf_counter() - t
+    plant.reset(np.array(plant.config.initial_q))
+    g = model.gravity(plant.state.q)
+    n = 2480
+    t = time.perf_counter()
+    for k in range(n):
+        plant.measure()
+        plant.command(g + np.array([40.0, 30.0, 15.0]) * np.sin(0.01 * k))
+        plant.step()
+    plant_only = time.perf_counter() - t
+    out = {'benchmark': 'offline simulation speed (1 core)',
+           'closed_loop_x_real_time': float(r.t[-1] / closed),
+           'closed_loop_us_per_step': closed / len(r.t) * 1e6,
+           'plant_only_x_real_time': n * plant.config.period_s / plant_only,
+           'plant_only_us_per_step': plant_only / n * 1e6,
+           'substeps': plant.config.substeps, 'goal': '>= 100x real time'}
+    _write('speed', out)
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('which', choices=['loop', 'accuracy', 'speed', 'all'])
+    ap.add_argument('--loop-seconds', type=float, default=20.0)
+    ap.add_argument('--no-plots', action='store_true')
+    a = ap.parse_args(argv)
+    if a.which in ('speed', 'all'):
+        bench_speed()
+    if a.which in ('accuracy', 'all'):
+        bench_accuracy(not a.no_plots)
+    if a.which in ('loop', 'all'):
+        bench_loop(a.loop_seconds)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,163 @@
+"""`ros2 run irb_control axis_bridge`: the axis computer's UDP torque protocol <-> ROS.
+
+Receives STATE packets, publishes /joint_states exactly as the simulator does, and answers
+each state with the controller's /torque_command carrying the state's sequence number
+(logic in axis_bridge_core.BridgeCore, protocol in doc/axis_protocol.md).
+"""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from irb_description.model import RobotModel
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from .axis_bridge_core import BridgeCore
+from .axis_protocol import MODE_NAMES
+from .node_util import declare, state_qos
+
+
+class AxisBridge(Node):
+    """UDP socket thread for states, subscription for commands, timer for link supervision."""
+
+    def __init__(self, **kwargs):
+        super().__init__('axis_bridge', **kwargs)
+        self.bind_address = declare(self, 'bind_address', '127.0.0.1',
+                                    'local address for state packets')
+        self.state_port = declare(self, 'state_port', 6510, 'local UDP port for STATE packets')
+        self.axis_address = declare(self, 'axis_address', '127.0.0.1',
+                                    'axis computer address for COMMAND packets')
+        self.command_port = declare(self, 'command_port', 6511,
+                                    "axis computer's UDP port for COMMAND packets")
+        link_timeout = declare(self, 'link_timeout_s', 0.1,
+                               'no valid state for longer: link lost [s]')
+        max_age = declare(self, 'max_command_age_s', 0.004032,
+                          'never send a command for a state older than this [s]')
+        status_period = declare(self, 'status_period_s', 0.5,
+                                'period of /axis_bridge/status [s]')
+        self.core = BridgeCore(link_timeout, max_age)
+        self.joint_names = RobotModel.load().joint_names
+        self.lock = threading.Lock()
+        self.last_key: int | None = None
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((self.bind_address, self.state_port))
+        self.sock.settimeout(0.05)
+        self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
+        self.pub_status = self.create_publisher(DiagnosticArray, 'axis_bridge/status', 10)
+        self.create_subscription(JointState, 'torque_command', self.on_command, state_qos())
+        self.create_service(Trigger, '~/reset', self.on_reset)
+        self.create_timer(0.02, self.on_timer)
+        self.create_timer(status_period, self.publish_status)
+        self.running = True
+        self.rx = threading.Thread(target=self.receive_loop, daemon=True)
+        self.rx.start()
+        self.get_logger().info(
+            f'axis_bridge: states on {self.bind_address}:{self.state_port}, commands to '
+            f'{self.axis_address}:{self.command_port}')
+
+    def receive_loop(self) -> None:
+        while self.running:
+            try:
+                data, _ = self.sock.recvfrom(2048)
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            with self.lock:
+                state, event = self.core.on_datagram(data, time.monotonic())
+                if state is not None:
+                    self.last_key = state.stamp_ns
+            if event:
+                self.get_logger().info(f'link {event}: states arriving (seq {state.seq})')
+            if state is not None:
+                msg = JointState()
+                msg.header.stamp = Time(sec=state.stamp_ns // 1_000_000_000,
+                                        nanosec=state.stamp_ns % 1_000_000_000)
+                msg.name = self.joint_names
+                msg.position = state.q[:3].tolist()
+                msg.velocity = state.qd[:3].tolist()
+                msg.effort = state.tau[:3].tolist()
+                self.pub_state.publish(msg)
+
+    def on_command(self, msg: JointState) -> None:
+        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        tau = np.zeros(6)
+        try:
+            idx = [list(msg.name).index(n) for n in self.joint_names] if msg.name else [0, 1, 2]
+            tau[:3] = [msg.effort[i] for i in idx]
+        except (ValueError, IndexError):
+            tau[:] = np.nan                       # counted and never sent by the core
+        with self.lock:
+            if key != self.last_key:              # answers an older state: too late
+                self.core.stats.late_commands += 1
+                return
+            data = self.core.on_command(tau, time.monotonic(), key)
+        if data is not None:
+            self.sock.sendto(data, (self.axis_address, self.command_port))
+
+    def on_reset(self, request, response):
+        with self.lock:
+            self.core.request_reset()
+        response.success = True
+        response.message = 'the next command carries reset = 1'
+        return response
+
+    def on_timer(self) -> None:
+        with self.lock:
+            event = self.core.check_link(time.monotonic())
+        if event == 'lost':
+            self.get_logger().error(
+                f'link lost: no valid state for {self.core.link_timeout_s} s; sending nothing '
+                'until states return')
+
+    def publish_status(self) -> None:
+        with self.lock:
+            s = self.core.stats
+            st = self.core.last_state
+            values = {'link_up': self.core.link_up, 'states': s.states,
+                      'commands_sent': s.commands_sent, 'late_commands': s.late_commands,
+                      'unanswered': s.unanswered, 'link_losses': s.link_losses,
+                      **{f'rejected_{k}': v for k, v in s.rejected.items()}}
+            if st is not None:
+                values.update(axis_seq=st.seq, axis_motors_on=st.motors_on,
+                              axis_mode=MODE_NAMES.get(st.mode, str(st.mode)),
+                              axis_error=st.error)
+        level = (DiagnosticStatus.OK if values['link_up'] and not values.get('axis_error')
+                 else DiagnosticStatus.ERROR)
+        status = DiagnosticStatus(level=level, name='axis_bridge', hardware_id='axis_computer',
+                                  message='link up' if values['link_up'] else 'link down',
+                                  values=[KeyValue(key=k, value=str(v))
+                                          for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_status.publish(msg)
+
+    def destroy_node(self):
+        self.running = False
+        self.sock.close()
+        self.rx.join(timeout=1.0)
+        return super().destroy_node()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = AxisBridge()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

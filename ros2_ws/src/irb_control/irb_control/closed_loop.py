@@ -1,0 +1,204 @@
+"""Offline closed loop: Plant + PdPlusController, no ROS (tests, benchmarks, other packages).
+
+    from irb_control.closed_loop import build_default, simulate_closed_loop
+    plant, ctrl = build_default(friction_mode='nominal', duration_s=10.0)
+    res = simulate_closed_loop(plant, ctrl, 11.0)
+    res.path_error_camera()      # (M,) [m]
+
+Each period: measure -> controller step -> command -> plant step, the same order and delay as
+the two ROS nodes in lockstep mode.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from irb_description.friction import FrictionMap, load_friction_map
+from irb_description.model import RobotModel
+from irb_description.path import CirclePath, thesis_circle
+
+from .pd_plus import MODE_HOLD, ControllerConfig, PdPlusController
+from .plant import Plant, PlantConfig, PlantFriction, default_plant_yaml, load_plant_friction
+from .profiles import default_circle_profile
+
+
+@dataclass
+class ClosedLoopResult:
+    """Logged arrays of one run; N controller periods, M camera samples, SI units.
+
+    t (N,) [s]; q, qd (N, 3) true state at t; q_meas, qd_meas (N, 3) encoder samples;
+    tau_cmd (N, 3) command computed at t (0 when none); tau_applied (N, 3) torque acting over
+    [t, t + T); q_ref, qd_ref (N, 3) (NaN where undefined); theta (N,); mode (N,) int;
+    published (N,) bool; cam_t (M,) [s], cam_p (M, 3) [m]; energy [J] = int sum |tau qd| dt
+    over the run (from the plant's substeps); events: plant log lines; stop_reason.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    q_meas: np.ndarray
+    qd_meas: np.ndarray
+    tau_cmd: np.ndarray
+    tau_applied: np.ndarray
+    q_ref: np.ndarray
+    qd_ref: np.ndarray
+    theta: np.ndarray
+    mode: np.ndarray
+    published: np.ndarray
+    cam_t: np.ndarray
+    cam_p: np.ndarray
+    energy: float
+    events: list
+    stop_reason: str
+    path: CirclePath | None = None
+    prediction_samples: int = 0
+
+    def path_error_camera(self, t_from: float | None = None) -> np.ndarray:
+        """Distance (M,) [m] from each camera point to the nearest point of the circle path,
+        from ``t_from`` (default: start of the path motion) on."""
+        t0 = self.path_start_time() if t_from is None else t_from
+        sel = self.cam_t >= t0
+        return circle_distance(self.path, self.cam_p[sel])
+
+    def path_start_time(self) -> float:
+        """Time [s] of the first sample in PATH/TIME mode (end of the ramp)."""
+        idx = np.flatnonzero((self.mode == 2) | (self.mode == 3))
+        return float(self.t[idx[0]]) if idx.size else float(self.t[-1])
+
+    def motion_mask(self) -> np.ndarray:
+        """(N,) True in PATH/TIME mode."""
+        return (self.mode == 2) | (self.mode == 3)
+
+    def joint_error(self) -> np.ndarray:
+        """Joint tracking error (N, 3) [rad]: the reference computed at t_k (which is for
+        t_k + n T, n = prediction_samples) minus the true q at t_{k+n}; NaN where undefined."""
+        n = self.prediction_samples
+        e = np.full_like(self.q, np.nan)
+        e[:len(e) - n] = self.q_ref[:len(e) - n] - self.q[n:]
+        return e
+
+    def finished(self) -> bool:
+        return bool(np.any(self.mode == MODE_HOLD))
+
+
+def circle_distance(path: CirclePath, p: np.ndarray) -> np.ndarray:
+    """Distance (M,) [m] from points p (M, 3) to the nearest point of a horizontal circle."""
+    p = np.asarray(p, float).reshape(-1, 3)
+    rho = np.hypot(p[:, 0] - path.center[0], p[:, 1] - path.center[1])
+    return np.hypot(rho - path.radius, p[:, 2] - path.center[2])
+
+
+def polyline_distance(curve: np.ndarray, p: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """Distance (M,) [m] from points p (M, 3) to the polyline ``curve`` (K, 3) (segments)."""
+    a, b = curve[:-1], curve[1:]
+    ab = b - a
+    L2 = np.maximum(np.einsum('ij,ij->i', ab, ab), 1e-18)
+    out = np.empty(len(p))
+    for s in range(0, len(p), chunk):
+        P = p[s:s + chunk, None, :]
+        u = np.clip(np.einsum('mkj,kj->mk', P - a[None], ab) / L2, 0.0, 1.0)
+        d = np.linalg.norm(P - (a[None] + u[..., None] * ab[None]), axis=2)
+        out[s:s + chunk] = d.min(axis=1)
+    return out
+
+
+def energy(t: np.ndarray, tau: np.ndarray, qd: np.ndarray) -> float:
+    """E = int sum_i |tau_i qd_i| dt [J] (thesis eq. 6.9), rectangle rule on the samples."""
+    dt = np.diff(t, append=t[-1] + (t[-1] - t[-2] if len(t) > 1 else 0.0))
+    return float(np.sum(np.abs(tau * qd).sum(axis=1) * dt))
+
+
+def simulate_closed_loop(plant: Plant, controller: PdPlusController, duration: float,
+                         enable: bool = True, stop_when_done: float | None = 0.2
+                         ) -> ClosedLoopResult:
+    """Run plant and controller together for ``duration`` [s] of simulated time.
+
+    ``enable``: call ``controller.enable()`` first. ``stop_when_done``: end the run this long
+    [s] after the controller reaches HOLD (None: always run ``duration``).
+    """
+    n = int(round(duration / plant.config.period_s))
+    t = np.empty(n)
+    arr = {k: np.full((n, 3), np.nan) for k in ('q', 'qd', 'q_meas', 'qd_meas', 'tau_cmd',
+                                                'tau_applied', 'q_ref', 'qd_ref')}
+    theta = np.full(n, np.nan)
+    mode = np.zeros(n, int)
+    published = np.zeros(n, bool)
+    cam_t, cam_p = [], []
+    if enable:
+        controller.enable()
+    e0 = plant.state.energy
+    done_at = None
+    k = 0
+    for k in range(n):
+        s = plant.state
+        t[k] = s.t
+        arr['q'][k] = s.q
+        arr['qd'][k] = s.qd
+        y = plant.measure()
+        arr['q_meas'][k] = y.q
+        arr['qd_meas'][k] = y.qd
+        out = controller.step(y.t, y.q, y.qd)
+        if out.publish:
+            plant.command(out.tau)
+            arr['tau_cmd'][k] = out.tau
+            published[k] = True
+        else:
+            arr['tau_cmd'][k] = 0.0
+        arr['q_ref'][k] = out.q_ref
+        arr['qd_ref'][k] = out.qd_ref
+        theta[k] = out.theta
+        mode[k] = out.mode
+        plant.step()
+        arr['tau_applied'][k] = plant.applied
+        for ct, cp in plant.take_camera():
+            cam_t.append(ct)
+            cam_p.append(cp)
+        if stop_when_done is not None and out.mode == MODE_HOLD:
+            if done_at is None:
+                done_at = s.t
+            elif s.t - done_at >= stop_when_done:
+                break
+    m = k + 1
+    return ClosedLoopResult(
+        t[:m], *(arr[key][:m] for key in ('q', 'qd', 'q_meas', 'qd_meas', 'tau_cmd',
+                                          'tau_applied', 'q_ref', 'qd_ref')),
+        theta[:m], mode[:m], published[:m], np.array(cam_t), np.array(cam_p).reshape(-1, 3),
+        plant.state.energy - e0, list(plant.events), controller.stop_reason, controller.path,
+        controller.config.prediction_samples)
+
+
+def controller_friction(model: RobotModel, mode: str, path: str | Path | None = None
+                        ) -> FrictionMap | None:
+    """Friction feed-forward map for ``mode``: 'none' -> None, 'nominal' -> model.friction,
+    'file' -> load_friction_map(path) (e.g. config/plant.yaml for true-plant FF)."""
+    if mode == 'none':
+        return None
+    if mode == 'nominal':
+        return model.friction
+    if mode == 'file':
+        if not path:
+            raise ValueError("friction mode 'file' needs a friction-map path")
+        return load_friction_map(path, model.joint_names)
+    raise ValueError(f"friction mode must be 'none', 'nominal' or 'file', not {mode!r}")
+
+
+def build_default(friction_mode: str = 'nominal', friction_file: str | Path | None = None,
+                  duration_s: float = 10.0, model: RobotModel | None = None,
+                  plant_config: PlantConfig = PlantConfig(),
+                  controller_config: ControllerConfig = ControllerConfig(),
+                  plant_friction: PlantFriction | None = None,
+                  path: CirclePath | None = None) -> tuple[Plant, PdPlusController]:
+    """Plant (friction from config/plant.yaml) and controller on the thesis circle with the
+    default polynomial profile of ``duration_s`` [s]."""
+    model = model or RobotModel.load()
+    path = path or thesis_circle()
+    if plant_friction is None:
+        _, plant_friction = load_plant_friction(default_plant_yaml(), model.joint_names)
+    if friction_mode == 'file' and friction_file is None:
+        friction_file = default_plant_yaml()
+    plant = Plant(model, plant_friction, plant_config)
+    ctrl = PdPlusController(model, path, controller_config,
+                            controller_friction(model, friction_mode, friction_file))
+    ctrl.set_path_profile(default_circle_profile(model, path, duration_s))
+    return plant, ctrl

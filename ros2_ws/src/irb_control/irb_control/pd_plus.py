@@ -1,0 +1,360 @@
+"""theta-driven inverse-dynamics PD+ controller with friction compensation (thesis §4.3, §6.4).
+
+Plain class, numpy in/out, no ROS imports. Per step (period T = 0.004032 s), from the measured
+q, qd (3,) at time t [s]:
+
+1. theta = atan2 of FK(q) about the path centre (unwrapped, clamped to the profile), predicted
+   ``prediction_samples`` (n = 3) samples ahead by integrating theta_dot = h(theta) (Euler, T).
+   Progress governor (not in the thesis): the prediction starts from theta_v, which advances
+   at h(theta_v) each period but is kept within [theta, theta + theta_max_lead_rad]. With the
+   lead 0 this is the thesis's purely measured theta, which never leaves a pose where
+   stiction holds the robot (thesis §6.1); a small lead (0.05 rad = 7.5 mm on the thesis
+   circle) lets the feedback break stiction while the reference still waits for a robot that
+   falls behind;
+   q and qd are predicted over the same Delta = n T with the reference acceleration.
+2. References q_ref, qd_ref, qdd_ref interpolated from the theta-profile at the predicted theta
+   (or from q(t + Delta) of a time trajectory in the time-driven mode, or from the 0.5 s
+   quintic ramp from the pose at enable to the start of the motion).
+3. PD+ (eq. in DESIGN §5): tau = M(q) qdd_ref + C(q, qd) qd_ref + g(q) + tau_f(v)
+   + Kp (q_ref - q) + Kd (qd_ref - qd), with v = alpha qd_ref + (1 - alpha) qd,
+   alpha = exp(-qd_ref^2 / (2 a^2)), a = 0.25 rad/s (eq. 4.9-4.10).
+4. Safety: non-finite or malformed inputs are rejected (no command for that sample); a
+   non-finite torque, |qd| above the speed limit, q outside the position limits or a tracking
+   error above ``max_tracking_error_rad`` latch the STOPPED state (no more commands: the drive
+   brakes after its command timeout) until ``enable``; the command is rate limited and then
+   clipped to the torque limits.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+from irb_description.friction import FrictionMap
+from irb_description.model import RobotModel
+from irb_description.path import CirclePath
+
+from .profiles import PathProfile, ProfileError, TimeTrajectory
+
+PERIOD_S = 0.004032
+
+# Modes, equal to the constants of irb_interfaces/msg/ControllerState
+MODE_IDLE = 0
+MODE_RAMP = 1
+MODE_PATH = 2
+MODE_TIME = 3
+MODE_STOPPED = 4
+MODE_HOLD = 5
+MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME: 'time',
+              MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
+
+
+def friction_blend(qd_ref: np.ndarray, qd_meas: np.ndarray, a: float = 0.25) -> np.ndarray:
+    """Friction-compensation input speed v (3,) [rad/s] (thesis eq. 4.9-4.10).
+
+    v = alpha qd_ref + (1 - alpha) qd_meas, alpha = exp(-qd_ref^2 / (2 a^2)), a [rad/s].
+    Near zero reference speed v follows the reference (the measured speed is unreliable there
+    because of stiction); at high reference speed it follows the measurement.
+    """
+    qd_ref = np.asarray(qd_ref, float)
+    alpha = np.exp(-qd_ref**2 / (2.0 * a * a))
+    return alpha * qd_ref + (1.0 - alpha) * np.asarray(qd_meas, float)
+
+
+def quintic_ramp(q0: np.ndarray, q1: np.ndarray, duration: float, t: float):
+    """Rest-to-rest ramp q0 -> q1 (3,) [rad] in ``duration`` [s] at time t [s] since its start.
+
+    s(u) = 10 u^3 - 15 u^4 + 6 u^5, u = t / duration; returns q, qd, qdd (3,) each.
+    """
+    u = min(max(t / duration, 0.0), 1.0)
+    s = u**3 * (10 - 15 * u + 6 * u * u)
+    ds = 30 * u * u * (1 - u) ** 2 / duration
+    dds = 60 * u * (1 - u) * (1 - 2 * u) / duration**2
+    d = np.asarray(q1, float) - np.asarray(q0, float)
+    return q0 + s * d, ds * d, dds * d
+
+
+def ramp_duration(q0: np.ndarray, q1: np.ndarray, velocity_limit: np.ndarray,
+                  minimum: float = 0.5, speed_fraction: float = 0.5) -> float:
+    """Ramp time [s]: ``minimum`` (0.5 s, thesis §6.4.4), longer if the quintic's peak speed
+    1.875 |dq| / T would exceed ``speed_fraction`` of the speed limit."""
+    need = 1.875 * np.abs(np.asarray(q1) - np.asarray(q0)) / (speed_fraction * velocity_limit)
+    return float(max(minimum, np.max(need)))
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """PD+ settings; arrays (3,) per joint, SI units. ``None`` limits come from the model."""
+
+    kp: tuple = (14000.0, 9000.0, 2500.0)         # [N m/rad]
+    kd: tuple = (800.0, 500.0, 140.0)             # [N m s/rad]
+    period_s: float = PERIOD_S
+    prediction_samples: int = 3
+    ramp_min_duration_s: float = 0.5
+    ramp_speed_fraction: float = 0.5
+    friction_blend_a: float = 0.25                # a [rad/s], eq. 4.9
+    torque_limit_nm: tuple | None = None          # default: model.limits.torque
+    torque_rate_limit_nm_s: tuple = (20000.0, 20000.0, 10000.0)
+    velocity_limit_fraction: float = 1.0          # of model.limits.velocity -> safe stop
+    position_margin_rad: float = 0.0              # stop this far inside the position limits
+    max_tracking_error_rad: tuple = (0.05, 0.05, 0.05)
+    end_tolerance_rad: float = 1e-3               # theta_v within this of the end: hold
+    theta_max_lead_rad: float = 0.05              # progress governor, 0 = pure thesis
+
+    def __post_init__(self):
+        for name in ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad'):
+            v = np.asarray(getattr(self, name), float)
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'{name} must be 3 finite numbers >= 0, got {v}')
+        if self.torque_limit_nm is not None:
+            v = np.asarray(self.torque_limit_nm, float)
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError('torque_limit_nm must be 3 finite numbers > 0')
+        if not (self.period_s > 0 and self.prediction_samples >= 0
+                and self.ramp_min_duration_s > 0 and self.friction_blend_a > 0
+                and 0 < self.ramp_speed_fraction <= 1 and self.velocity_limit_fraction > 0):
+            raise ValueError(f'invalid controller settings: {self}')
+
+
+@dataclass
+class ControlOutput:
+    """Result of one step. ``publish`` False: send no command for this sample.
+
+    tau (3,) [N m] is always finite (zeros when no command). The other fields are for the
+    ControllerState message (NaN when not defined in the current mode).
+    """
+
+    publish: bool
+    tau: np.ndarray
+    mode: int
+    stop_reason: str = ''
+    theta: float = math.nan
+    theta_predicted: float = math.nan
+    theta_dot_ref: float = math.nan
+    q_ref: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    qd_ref: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    qdd_ref: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    q_error: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    qd_error: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    tau_model: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    tau_friction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    tau_feedback: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    rejected_input: bool = False
+
+
+class Watchdog:
+    """Stale-measurement detector on a monotonic clock.
+
+    ``feed(now)`` on every valid sample; ``expired(now)`` is True once more than
+    ``missed_samples`` periods (plus half a period) passed without one.
+    """
+
+    def __init__(self, period_s: float = PERIOD_S, missed_samples: int = 3,
+                 minimum_timeout_s: float = 0.0):
+        self.timeout_s = max((missed_samples + 0.5) * period_s, minimum_timeout_s)
+        self.last: float | None = None
+
+    def feed(self, now: float) -> None:
+        self.last = now
+
+    def reset(self) -> None:
+        self.last = None
+
+    def expired(self, now: float) -> bool:
+        return self.last is not None and now - self.last > self.timeout_s
+
+
+class PdPlusController:
+    """The controller state machine; see the module docstring.
+
+    IDLE --enable--> RAMP --> PATH (theta-driven) or TIME (time-driven) --> HOLD (end pose);
+    any --stop/abort--> STOPPED (latched) --enable--> RAMP. The profile is set with
+    ``set_path_profile`` or ``set_time_trajectory`` (only while not moving).
+    """
+
+    def __init__(self, model: RobotModel, path: CirclePath, config: ControllerConfig =
+                 ControllerConfig(), friction: FrictionMap | None = None):
+        self.model = model.copy()
+        self._pm, self._pd = self.model.model, self.model.data
+        self.path = path
+        self.config = config
+        self.friction = friction
+        c = config
+        self.kp = np.asarray(c.kp, float)
+        self.kd = np.asarray(c.kd, float)
+        lim = self.model.limits
+        self.tau_max = lim.torque.copy() if c.torque_limit_nm is None else np.asarray(
+            c.torque_limit_nm, float)
+        self.rate_max = np.asarray(c.torque_rate_limit_nm_s, float) * c.period_s  # per step
+        self.v_max = lim.velocity * c.velocity_limit_fraction
+        self.q_lo = lim.lower + c.position_margin_rad
+        self.q_hi = lim.upper - c.position_margin_rad
+        self.e_max = np.asarray(c.max_tracking_error_rad, float)
+        self.delta = c.prediction_samples * c.period_s
+        self.profile: PathProfile | TimeTrajectory | None = None
+        self.mode = MODE_IDLE
+        self.stop_reason = ''
+        self.rejected_inputs = 0
+        self._enable_requested = False
+        self._prev_tau: np.ndarray | None = None
+        self._theta = 0.0
+        self._theta_v = 0.0
+        self._t0 = 0.0
+        self._ramp_from = np.zeros(3)
+        self._ramp_T = c.ramp_min_duration_s
+
+    # --- commands ------------------------------------------------------------------------
+    def set_path_profile(self, profile: PathProfile) -> None:
+        """Use a theta-profile (theta-driven mode). ProfileError if it leaves the limits."""
+        self._set_profile(profile)
+
+    def set_time_trajectory(self, traj: TimeTrajectory) -> None:
+        """Use a time trajectory (time-driven mode). ProfileError if it leaves the limits."""
+        self._set_profile(traj)
+
+    def _set_profile(self, profile) -> None:
+        if self.mode in (MODE_RAMP, MODE_PATH, MODE_TIME):
+            raise ProfileError('cannot change the profile while moving; stop first')
+        profile.check_limits(self.model, self.config.velocity_limit_fraction)
+        self.profile = profile
+
+    def enable(self) -> tuple[bool, str]:
+        """Request motion: clears a latched stop; the next valid sample starts the ramp."""
+        if self.profile is None:
+            return False, 'no profile'
+        if self.mode in (MODE_RAMP, MODE_PATH, MODE_TIME):
+            return True, f'already running ({MODE_NAMES[self.mode]})'
+        self._enable_requested = True
+        self.stop_reason = ''
+        self.mode = MODE_IDLE
+        return True, 'enabled: ramp to the start on the next sample'
+
+    def stop(self, reason: str) -> None:
+        """Latch STOPPED with ``reason``; no command is sent until ``enable``."""
+        if self.mode != MODE_STOPPED:
+            self.stop_reason = reason
+        self.mode = MODE_STOPPED
+        self._enable_requested = False
+        self._prev_tau = None
+
+    @property
+    def time_driven(self) -> bool:
+        return isinstance(self.profile, TimeTrajectory)
+
+    def start_pose(self) -> np.ndarray:
+        """Joint position (3,) [rad] where the profile starts."""
+        return self.profile.q[0].copy()
+
+    # --- the step ------------------------------------------------------------------------
+    def step(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
+        """One control step for the measurement q (3,) [rad], qd (3,) [rad/s] taken at t [s]."""
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        if (q.shape != (3,) or qd.shape != (3,) or not math.isfinite(t)
+                or not np.all(np.isfinite(q)) or not np.all(np.isfinite(qd))):
+            self.rejected_inputs += 1
+            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason,
+                                 rejected_input=True)
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
+        # safety on the measurement
+        if np.any(np.abs(qd) > self.v_max):
+            self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
+        elif np.any(q < self.q_lo) or np.any(q > self.q_hi):
+            self.stop(f'position limit: q = {q.round(4).tolist()} rad')
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
+        if self.mode == MODE_IDLE:
+            if not self._enable_requested or self.profile is None:
+                return ControlOutput(False, np.zeros(3), self.mode)
+            self._enable_requested = False
+            self._ramp_from = q.copy()
+            start = self.start_pose()
+            self._ramp_T = ramp_duration(q, start, self.model.limits.velocity,
+                                         self.config.ramp_min_duration_s,
+                                         self.config.ramp_speed_fraction)
+            self._t0 = t
+            self.mode = MODE_RAMP
+            self._prev_tau = None
+
+        out = ControlOutput(True, np.zeros(3), self.mode)
+        d = self.delta
+        tp = t + d
+        if self.mode == MODE_RAMP and tp - self._t0 >= self._ramp_T:
+            self.mode = MODE_TIME if self.time_driven else MODE_PATH
+            self._t0 = self._t0 + self._ramp_T     # time origin of the profile
+            self._theta = self.profile.theta_start if not self.time_driven else 0.0
+            self._theta_v = self._theta
+        if self.mode == MODE_RAMP:
+            q_ref, qd_ref, qdd_ref = quintic_ramp(self._ramp_from, self.start_pose(),
+                                                  self._ramp_T, tp - self._t0)
+        elif self.mode == MODE_TIME or (self.mode == MODE_HOLD and self.time_driven):
+            row = self.profile.sample(tp - self._t0)
+            q_ref, qd_ref, qdd_ref = row[0:3], row[3:6], row[6:9]
+            if tp - self._t0 >= self.profile.duration and self.mode == MODE_TIME:
+                self.mode = MODE_HOLD
+        else:   # PATH or HOLD on a theta-profile
+            prof = self.profile
+            raw = float(self.path.theta_of(self.model.fk(q)))
+            # unwrap against the previous theta, clamp to the profile
+            dth = (raw - self._theta + math.pi) % (2 * math.pi) - math.pi
+            theta = min(max(self._theta + dth, prof.theta_start), prof.theta_end)
+            self._theta = theta
+            T = self.config.period_s
+            # progress governor: theta_v runs on h(theta_v) but stays within
+            # [theta, theta + theta_max_lead_rad]; 0 lead = theta from the measurement only
+            tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
+            tv = min(max(tv, theta), theta + self.config.theta_max_lead_rad)
+            self._theta_v = tv
+            th = tv
+            for _ in range(self.config.prediction_samples):
+                th = min(th + T * prof.h(th), prof.theta_end)
+            out.theta, out.theta_predicted = theta, th
+            if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
+                self.mode = MODE_HOLD
+                q_ref, qd_ref, qdd_ref = prof.q[-1], np.zeros(3), np.zeros(3)
+                out.theta_dot_ref = 0.0
+            else:
+                row = prof.sample(th)
+                out.theta_dot_ref = row[0]
+                q_ref, qd_ref, qdd_ref = row[2:5], row[5:8], row[8:11]
+        out.mode = self.mode
+
+        # delay compensation of the measurement
+        q_p = q + d * qd + 0.5 * d * d * qdd_ref
+        qd_p = qd + d * qdd_ref
+        e = q_ref - q_p
+        de = qd_ref - qd_p
+        if np.any(np.abs(e) > self.e_max):
+            self.stop(f'tracking error {np.abs(e).round(4).tolist()} rad > '
+                      f'{self.e_max.tolist()}')
+            out.publish, out.mode, out.stop_reason = False, self.mode, self.stop_reason
+            return out
+        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g
+        M = pin.crba(self._pm, self._pd, q_p)
+        M = np.triu(M) + np.triu(M, 1).T
+        C = pin.computeCoriolisMatrix(self._pm, self._pd, q_p, qd_p)
+        g = pin.computeGeneralizedGravity(self._pm, self._pd, q_p)
+        tau_model = M @ qdd_ref + C @ qd_ref + g
+        if self.friction is not None:
+            tau_f = self.friction.torque(friction_blend(qd_ref, qd_p,
+                                                        self.config.friction_blend_a))
+        else:
+            tau_f = np.zeros(3)
+        tau_fb = self.kp * e + self.kd * de
+        tau = tau_model + tau_f + tau_fb
+        if not np.all(np.isfinite(tau)):
+            self.stop('non-finite torque computed')
+            out.publish, out.mode, out.stop_reason = False, self.mode, self.stop_reason
+            out.tau = np.zeros(3)
+            return out
+        if self._prev_tau is not None:
+            tau = np.clip(tau, self._prev_tau - self.rate_max, self._prev_tau + self.rate_max)
+        tau = np.clip(tau, -self.tau_max, self.tau_max)
+        self._prev_tau = tau
+        out.tau = tau
+        out.q_ref, out.qd_ref, out.qdd_ref = q_ref.copy(), qd_ref.copy(), qdd_ref.copy()
+        out.q_error, out.qd_error = e, de
+        out.tau_model, out.tau_friction, out.tau_feedback = tau_model, tau_f, tau_fb
+        return out

@@ -1,0 +1,278 @@
+"""`ros2 run irb_control pdplus`: the theta-driven PD+ controller (adapter over pd_plus).
+
+/joint_states in -> PdPlusController.step -> /torque_command and /controller_state out, one
+message each per sample. Profile from /planned_trajectory (latched) or the built-in default.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import rclpy
+from irb_description.model import RobotModel
+from irb_description.path import CirclePath
+from irb_interfaces.msg import ControllerState
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from .closed_loop import controller_friction
+from .node_util import declare, latched_qos, state_qos
+from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
+                      ControllerConfig, PdPlusController, Watchdog)
+from .profiles import ProfileError, default_circle_profile, sine_trajectory
+from .trajectory_io import profile_from_msg
+
+
+class PdPlusNode(Node):
+    """Subscribes /joint_states and /planned_trajectory; publishes /torque_command
+    (sensor_msgs/JointState, effort [N m], stamp = the answered state's stamp) and
+    /controller_state; services ~/enable and ~/stop (std_srvs/Trigger)."""
+
+    def __init__(self, **kwargs):
+        super().__init__('pdplus', **kwargs)
+        d = ControllerConfig()
+        P = {}
+
+        def par(name, default, text):
+            P[name] = declare(self, name, default, text)
+        par('kp', list(d.kp), 'proportional gains [N m/rad]')
+        par('kd', list(d.kd), 'derivative gains [N m s/rad]')
+        par('period_s', d.period_s, 'sample period [s]')
+        par('prediction_samples', d.prediction_samples, 'delay compensation [samples]')
+        par('ramp_min_duration_s', d.ramp_min_duration_s, 'ramp to the start [s] (minimum)')
+        par('friction_mode', 'nominal', "friction feed-forward: 'none', 'nominal', 'file'")
+        par('friction_map_file', '', "friction-map YAML for mode 'file'")
+        par('friction_blend_a', d.friction_blend_a, 'a of eq. 4.9 [rad/s]')
+        par('torque_limit_nm', [0.0], 'torque limits [N m]; [0.0] = the model limits')
+        par('torque_rate_limit_nm_s', list(d.torque_rate_limit_nm_s), 'torque rate [N m/s]')
+        par('velocity_limit_fraction', d.velocity_limit_fraction,
+            'safe stop above this fraction of the speed limits [-]')
+        par('max_tracking_error_rad', list(d.max_tracking_error_rad),
+            'safe stop above this joint error [rad]')
+        par('theta_max_lead_rad', d.theta_max_lead_rad, 'progress governor lead [rad]; 0 = '
+            'theta from the measurement only (thesis)')
+        par('reference_mode', 'theta', "'theta' (theta-driven) or 'time' (q(t))")
+        par('builtin_profile', 'circle', "used until a plan arrives: 'circle' or 'sine'")
+        par('profile_duration_s', 10.0, 'built-in circle: one circle in this time [s]')
+        par('min_theta_dot', 0.05, 'floor of h(theta) [rad/s]')
+        par('sine_joint', 1, 'built-in sine: joint 1..3')
+        par('sine_peak_speed_rad_s', 0.5, 'built-in sine: peak speed [rad/s]')
+        par('sine_amplitude_rad', 0.3, 'built-in sine: amplitude A of A(1 - cos wt) [rad]')
+        par('sine_cycles', 1.0, 'built-in sine: number of periods')
+        par('path_center', [0.6, 0.0, 0.13], 'circle centre [m] (base_link)')
+        par('path_radius', 0.15, 'circle radius [m]')
+        par('path_start_angle', 0.0, 'circle start angle [rad]')
+        par('path_direction', 1, 'circle direction: +1 counter-clockwise, -1 clockwise')
+        par('auto_enable', True, 'start moving as soon as a profile and joint states exist')
+        par('watchdog_missed_samples', 3, 'safe stop after this many missing samples')
+        par('watchdog_sim_time_timeout_s', 1.0, 'minimum watchdog timeout with use_sim_time '
+            '(lockstep) [s]')
+        par('deadline_s', 0.002, 'a step slower than this counts as a missed deadline [s]')
+        par('executor', 'events', "'events' (EventsExecutor, spin_once loop) or 'single'")
+        self.P = P
+        self.model = RobotModel.load()
+        self.path = CirclePath(np.array(P['path_center'], float), P['path_radius'],
+                               P['path_start_angle'], int(P['path_direction']))
+        tl = P['torque_limit_nm']
+        cfg = ControllerConfig(
+            kp=tuple(P['kp']), kd=tuple(P['kd']), period_s=P['period_s'],
+            prediction_samples=P['prediction_samples'],
+            ramp_min_duration_s=P['ramp_min_duration_s'],
+            friction_blend_a=P['friction_blend_a'],
+            torque_limit_nm=None if len(tl) != 3 else tuple(tl),
+            torque_rate_limit_nm_s=tuple(P['torque_rate_limit_nm_s']),
+            velocity_limit_fraction=P['velocity_limit_fraction'],
+            max_tracking_error_rad=tuple(P['max_tracking_error_rad']),
+            theta_max_lead_rad=P['theta_max_lead_rad'])
+        friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
+        self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
+        self.time_driven = P['reference_mode'] == 'time'
+        self._set_builtin_profile()
+        sim_time = self.get_parameter('use_sim_time').value
+        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.watchdog = Watchdog(cfg.period_s, P['watchdog_missed_samples'],
+                                 P['watchdog_sim_time_timeout_s'] if sim_time else 0.0)
+        self.missed = 0
+        self._last_stamp: float | None = None
+        self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_qos())
+        self.pub_state = self.create_publisher(ControllerState, 'controller_state', state_qos())
+        self.create_subscription(JointState, 'joint_states', self.on_state, state_qos())
+        self.create_subscription(JointTrajectory, 'planned_trajectory', self.on_plan,
+                                 latched_qos())
+        self.create_service(Trigger, '~/enable', self.on_enable)
+        self.create_service(Trigger, '~/stop', self.on_stop)
+        self.create_timer(cfg.period_s, self.on_watchdog, clock=self.steady)
+        self._cmd = JointState(name=self.model.joint_names)
+        self._st = ControllerState()
+        self.get_logger().info(
+            f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
+            f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")
+
+    def _set_builtin_profile(self) -> None:
+        P = self.P
+        if P['builtin_profile'] == 'sine':
+            start = default_circle_profile(self.model, self.path, P['profile_duration_s'],
+                                           P['min_theta_dot']).q[0]
+            traj = sine_trajectory(start, int(P['sine_joint']) - 1, P['sine_peak_speed_rad_s'],
+                                   P['sine_amplitude_rad'], P['sine_cycles'])
+            self.ctrl.set_time_trajectory(traj)
+            self.time_driven = True
+        elif P['builtin_profile'] == 'circle':
+            prof = default_circle_profile(self.model, self.path, P['profile_duration_s'],
+                                          P['min_theta_dot'])
+            if self.time_driven:
+                from .profiles import TimeTrajectory
+                rows = np.array([prof.sample(x) for x in prof.theta])
+                prof = TimeTrajectory(prof.t - prof.t[0], rows[:, 2:5], rows[:, 5:8],
+                                      rows[:, 8:11])
+                self.ctrl.set_time_trajectory(prof)
+            else:
+                self.ctrl.set_path_profile(prof)
+        else:
+            raise ValueError(f"builtin_profile must be 'circle' or 'sine', "
+                             f"not {P['builtin_profile']!r}")
+        if P['auto_enable']:
+            self.ctrl.enable()
+
+    # --- callbacks -----------------------------------------------------------------------
+    def on_state(self, msg: JointState) -> None:
+        t_in = time.perf_counter()
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        q, qd = _by_name(msg, self.model.joint_names)
+        T = self.ctrl.config.period_s
+        if self._last_stamp is not None and stamp - self._last_stamp > 1.5 * T:
+            self.missed += int(round((stamp - self._last_stamp) / T)) - 1
+        self._last_stamp = stamp
+        was = self.ctrl.mode
+        out = self.ctrl.step(stamp, q, qd)
+        if not out.rejected_input:
+            self.watchdog.feed(self.steady.now().nanoseconds * 1e-9)
+        if out.publish:
+            c = self._cmd
+            c.header.stamp = msg.header.stamp
+            c.effort = out.tau.tolist()
+            self.pub_cmd.publish(c)
+        dt = time.perf_counter() - t_in
+        if dt > self.P['deadline_s']:
+            self.missed += 1
+        if out.mode != was:
+            # one call site per severity: rclpy refuses a severity change at the same site
+            text = (f'mode {MODE_NAMES[was]} -> {MODE_NAMES[out.mode]}'
+                    + (f': {out.stop_reason}' if out.stop_reason else ''))
+            if out.mode == MODE_STOPPED:
+                self.get_logger().error(text)
+            else:
+                self.get_logger().info(text)
+        s = self._st
+        s.header.stamp = msg.header.stamp
+        s.mode = out.mode
+        s.stop_reason = out.stop_reason
+        s.theta, s.theta_predicted, s.theta_dot_ref = (
+            float(out.theta), float(out.theta_predicted), float(out.theta_dot_ref))
+        s.q_ref, s.qd_ref, s.qdd_ref = (out.q_ref.tolist(), out.qd_ref.tolist(),
+                                        out.qdd_ref.tolist())
+        s.q_error, s.qd_error = out.q_error.tolist(), out.qd_error.tolist()
+        s.tau_model, s.tau_friction = out.tau_model.tolist(), out.tau_friction.tolist()
+        s.tau_feedback, s.tau_command = out.tau_feedback.tolist(), out.tau.tolist()
+        s.missed_deadlines = self.missed
+        s.rejected_inputs = self.ctrl.rejected_inputs
+        s.step_duration = dt
+        self.pub_state.publish(s)
+
+    def on_watchdog(self) -> None:
+        if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):
+            now = self.steady.now().nanoseconds * 1e-9
+            if self.watchdog.expired(now):
+                self.ctrl.stop(f'watchdog: no valid joint_states for '
+                               f'{now - self.watchdog.last:.4f} s')
+                self.get_logger().error(f'safe stop: {self.ctrl.stop_reason}')
+                self._publish_stopped()
+
+    def _publish_stopped(self) -> None:
+        s = ControllerState()
+        s.header.stamp = self.get_clock().now().to_msg()
+        s.mode = MODE_STOPPED
+        s.stop_reason = self.ctrl.stop_reason
+        s.missed_deadlines = self.missed
+        s.rejected_inputs = self.ctrl.rejected_inputs
+        self.pub_state.publish(s)
+
+    def on_plan(self, msg: JointTrajectory) -> None:
+        try:
+            prof = profile_from_msg(msg, self.model, self.path, self.time_driven,
+                                    self.P['min_theta_dot'])
+            if self.time_driven and not hasattr(prof, 'duration'):
+                raise ProfileError('time-driven mode needs a time trajectory')
+            if hasattr(prof, 'duration'):
+                self.ctrl.set_time_trajectory(prof)
+            else:
+                self.ctrl.set_path_profile(prof)
+        except ProfileError as exc:
+            self.get_logger().error(f'planned_trajectory rejected: {exc}')
+            return
+        self.get_logger().info(f'new profile from planned_trajectory ({len(msg.points)} '
+                               f'points, joints {list(msg.joint_names)})')
+        if self.P['auto_enable']:
+            self.ctrl.enable()
+
+    def on_enable(self, request, response):
+        response.success, response.message = self.ctrl.enable()
+        if response.success:
+            self.watchdog.reset()
+        self.get_logger().info(f'enable: {response.message}')
+        return response
+
+    def on_stop(self, request, response):
+        self.ctrl.stop('stop service')
+        self._publish_stopped()
+        response.success, response.message = True, 'stopped (latched until enable)'
+        self.get_logger().warn('stop service: safe stop latched')
+        return response
+
+
+def _by_name(msg: JointState, names: list[str]):
+    """q, qd (3,) in joint order; arrays of NaN when the message lacks a joint."""
+    try:
+        if msg.name:
+            idx = [list(msg.name).index(n) for n in names]
+        else:
+            idx = list(range(len(names)))
+        return (np.array([msg.position[i] for i in idx], float),
+                np.array([msg.velocity[i] for i in idx], float))
+    except (ValueError, IndexError):
+        return np.full(3, np.nan), np.full(3, np.nan)
+
+
+def make_executor(kind: str, context=None):
+    """'events': rclpy's EventsExecutor (faster; drive it with spin_once), else single."""
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+            return EventsExecutor(context=context)
+        except ImportError:
+            pass
+    return SingleThreadedExecutor(context=context)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = PdPlusNode()
+    executor = make_executor(node.P['executor'])
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,249 @@
+"""Reference profiles for the PD+ controller (no ROS imports).
+
+* ``PathProfile``: a theta-profile along a path. Grid theta (N,) [rad] with theta_dot = h(theta)
+  [rad/s], theta_ddot [rad/s^2] and the joint references on the same grid,
+  q = Phi(theta), qd = Phi'(theta) theta_dot, qdd = Phi''(theta) theta_dot^2 + Phi'(theta)
+  theta_ddot (thesis eq. 6.1-6.3), each (N, 3). Interpolated linearly in theta.
+* ``TimeTrajectory``: q(t), qd(t), qdd(t) on a time grid t (N,) [s] for the time-driven mode
+  (identification sweeps, comparisons). Interpolated linearly in t.
+* Builders: the thesis's default circle profile with a fourth-order polynomial speed profile
+  (§4.5), a profile from any theta(t) samples, a joint trajectory turned into a theta-profile,
+  and single-joint (1 - cos) sine trajectories (§4.4).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from irb_description.model import RobotModel
+from irb_description.path import CirclePath, joint_path
+
+
+class ProfileError(ValueError):
+    """A profile or trajectory is malformed (shape, NaN, not monotonic, outside limits)."""
+
+
+def _check_finite(name: str, *arrays) -> None:
+    for a in arrays:
+        if not np.all(np.isfinite(a)):
+            raise ProfileError(f'{name}: non-finite values')
+
+
+@dataclass(frozen=True)
+class PathProfile:
+    """theta-profile with joint references; see module docstring. ``t`` (N,) [s] optional."""
+
+    theta: np.ndarray
+    theta_dot: np.ndarray
+    theta_ddot: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    t: np.ndarray | None = None
+
+    def __post_init__(self):
+        n = len(self.theta)
+        if n < 2:
+            raise ProfileError('a profile needs at least 2 points')
+        for name in ('theta_dot', 'theta_ddot'):
+            if np.shape(getattr(self, name)) != (n,):
+                raise ProfileError(f'{name} must have shape ({n},)')
+        for name in ('q', 'qd', 'qdd'):
+            if np.shape(getattr(self, name)) != (n, 3):
+                raise ProfileError(f'{name} must have shape ({n}, 3)')
+        _check_finite('theta-profile', self.theta, self.theta_dot, self.theta_ddot, self.q,
+                      self.qd, self.qdd)
+        if np.any(np.diff(self.theta) <= 0):
+            raise ProfileError('theta grid must be strictly increasing')
+        if np.any(self.theta_dot <= 0):
+            raise ProfileError('theta_dot = h(theta) must be > 0 (theta-driven control '
+                               'stands still where it is 0)')
+        # one table for a single interpolation call per step: [theta_dot, theta_ddot, q, qd, qdd]
+        object.__setattr__(self, '_table', np.column_stack(
+            [self.theta_dot, self.theta_ddot, self.q, self.qd, self.qdd]))
+
+    @property
+    def theta_start(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def theta_end(self) -> float:
+        return float(self.theta[-1])
+
+    def h(self, theta: float) -> float:
+        """theta_dot [rad/s] at theta [rad] (clamped to the grid)."""
+        return float(np.interp(theta, self.theta, self.theta_dot))
+
+    def sample(self, theta: float) -> np.ndarray:
+        """Row (11,): theta_dot, theta_ddot, q (3), qd (3), qdd (3) at theta (clamped)."""
+        th = self.theta
+        if theta <= th[0]:
+            return self._table[0].copy()
+        if theta >= th[-1]:
+            return self._table[-1].copy()
+        i = int(np.searchsorted(th, theta)) - 1
+        w = (theta - th[i]) / (th[i + 1] - th[i])
+        return self._table[i] + w * (self._table[i + 1] - self._table[i])
+
+    def check_limits(self, model: RobotModel, speed_fraction: float = 1.0) -> None:
+        """ProfileError if q leaves the position limits or |qd| exceeds the speed limits."""
+        lim = model.limits
+        if np.any(self.q < lim.lower) or np.any(self.q > lim.upper):
+            raise ProfileError('theta-profile leaves the joint position limits')
+        if np.any(np.abs(self.qd) > speed_fraction * lim.velocity):
+            raise ProfileError(f'theta-profile exceeds {speed_fraction:.0%} of the speed limits '
+                               f'(peak {np.abs(self.qd).max(axis=0).round(3).tolist()} rad/s)')
+
+
+@dataclass(frozen=True)
+class TimeTrajectory:
+    """q(t), qd(t), qdd(t): t (N,) [s] from 0, each reference (N, 3) [rad, rad/s, rad/s^2]."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.t)
+        if n < 2:
+            raise ProfileError('a trajectory needs at least 2 points')
+        for name in ('q', 'qd', 'qdd'):
+            if np.shape(getattr(self, name)) != (n, 3):
+                raise ProfileError(f'{name} must have shape ({n}, 3)')
+        _check_finite('trajectory', self.t, self.q, self.qd, self.qdd)
+        if np.any(np.diff(self.t) <= 0):
+            raise ProfileError('trajectory time must be strictly increasing')
+        object.__setattr__(self, '_table', np.column_stack([self.q, self.qd, self.qdd]))
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def sample(self, t: float) -> np.ndarray:
+        """Row (9,): q (3), qd (3), qdd (3) at time t [s] since the start (clamped; after the
+        end the final position with zero speed and acceleration)."""
+        tt = self.t
+        if t <= tt[0]:
+            return self._table[0].copy()
+        if t >= tt[-1]:
+            row = self._table[-1].copy()
+            row[3:] = 0.0
+            return row
+        i = int(np.searchsorted(tt, t)) - 1
+        w = (t - tt[i]) / (tt[i + 1] - tt[i])
+        return self._table[i] + w * (self._table[i + 1] - self._table[i])
+
+    def check_limits(self, model: RobotModel, speed_fraction: float = 1.0) -> None:
+        lim = model.limits
+        if np.any(self.q < lim.lower) or np.any(self.q > lim.upper):
+            raise ProfileError('trajectory leaves the joint position limits')
+        if np.any(np.abs(self.qd) > speed_fraction * lim.velocity):
+            raise ProfileError('trajectory exceeds the speed limits')
+
+
+# --- builders ------------------------------------------------------------------------------
+def polynomial_theta_of_time(duration: float, n: int = 2001, theta_end: float = 2 * np.pi):
+    """Fourth-order polynomial speed profile (thesis §4.5): theta_dot(t) = 30 theta_end s^2
+    (1 - s)^2 / T, s = t / T, so theta goes 0 -> theta_end with zero speed and acceleration at
+    both ends (theta(t) = theta_end (10 s^3 - 15 s^4 + 6 s^5)).
+
+    Returns t, theta, theta_dot, theta_ddot, each (n,), SI units.
+    """
+    if not duration > 0:
+        raise ProfileError(f'duration must be > 0, got {duration}')
+    t = np.linspace(0.0, duration, n)
+    s = t / duration
+    theta = theta_end * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    theta_dot = theta_end / duration * 30 * s**2 * (1 - s) ** 2
+    theta_ddot = theta_end / duration**2 * 60 * s * (1 - s) * (1 - 2 * s)
+    return t, theta, theta_dot, theta_ddot
+
+
+def profile_from_theta_samples(model: RobotModel, path: CirclePath, theta: np.ndarray,
+                               theta_dot: np.ndarray, theta_ddot: np.ndarray,
+                               t: np.ndarray | None = None, min_theta_dot: float = 0.05,
+                               grid: int = 721) -> PathProfile:
+    """PathProfile on a uniform theta grid from samples theta (M,), theta_dot, theta_ddot.
+
+    The samples are resampled to ``grid`` points in theta. theta_dot is floored at
+    ``min_theta_dot`` [rad/s] (delta of thesis §6.1) where it would stop the theta-driven
+    controller (at the ends of a rest-to-rest profile); theta_ddot is set to 0 there.
+    """
+    theta = np.asarray(theta, float)
+    _check_finite('theta samples', theta, theta_dot, theta_ddot)
+    if theta.ndim != 1 or len(theta) < 2 or np.any(np.diff(theta) < 0):
+        raise ProfileError('theta samples must be a non-decreasing 1-D array')
+    keep = np.concatenate([[True], np.diff(theta) > 0])
+    th_u = np.linspace(theta[0], theta[-1], grid)
+    thd = np.interp(th_u, theta[keep], np.asarray(theta_dot, float)[keep])
+    thdd = np.interp(th_u, theta[keep], np.asarray(theta_ddot, float)[keep])
+    floor = thd < min_theta_dot
+    thd = np.where(floor, min_theta_dot, thd)
+    thdd = np.where(floor, 0.0, thdd)
+    jp = joint_path(model, path, th_u)
+    qd = jp.dq * thd[:, None]
+    qdd = jp.ddq * thd[:, None] ** 2 + jp.dq * thdd[:, None]
+    tt = None
+    if t is not None:
+        tt = np.interp(th_u, theta[keep], np.asarray(t, float)[keep])
+    return PathProfile(th_u, thd, thdd, jp.q, qd, qdd, tt)
+
+
+def default_circle_profile(model: RobotModel, path: CirclePath, duration: float = 10.0,
+                           min_theta_dot: float = 0.05, grid: int = 721) -> PathProfile:
+    """The built-in default: one circle in ``duration`` [s] with the polynomial speed profile."""
+    t, th, thd, thdd = polynomial_theta_of_time(duration)
+    return profile_from_theta_samples(model, path, th, thd, thdd, t, min_theta_dot, grid)
+
+
+def profile_from_joint_trajectory(model: RobotModel, path: CirclePath, t: np.ndarray,
+                                  q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                                  min_theta_dot: float = 0.05) -> PathProfile:
+    """theta-profile from a joint trajectory (N,) / (N, 3) that follows ``path``.
+
+    theta = atan2 of FK(q) about the centre (unwrapped, from 0), theta_dot = p'(theta) . J qd
+    / |p'|^2; theta_ddot by differentiating theta_dot in time. The joint references are the
+    trajectory's own; theta_dot is floored at ``min_theta_dot``.
+    """
+    t, q, qd, qdd = (np.asarray(a, float) for a in (t, q, qd, qdd))
+    _check_finite('joint trajectory', t, q, qd, qdd)
+    pts = np.array([model.fk(qi) for qi in q])
+    theta = np.unwrap(np.arctan2(pts[:, 1] - path.center[1], pts[:, 0] - path.center[0])
+                      * path.direction)
+    theta = theta - theta[0] + path.theta_of(pts[0])
+    if np.max(np.abs(np.linalg.norm((pts - path.point(theta))[:, :2], axis=1))) > 5e-3 or \
+            np.max(np.abs(pts[:, 2] - path.center[2])) > 5e-3:
+        raise ProfileError('joint trajectory does not follow the configured path (> 5 mm)')
+    dp = path.d_point(theta)
+    v = np.array([model.jacobian(qi) @ qdi for qi, qdi in zip(q, qd)])
+    thd = np.einsum('ij,ij->i', dp, v) / np.einsum('ij,ij->i', dp, dp)
+    thdd = np.gradient(thd, t) if len(t) > 2 else np.zeros_like(thd)
+    keep = np.concatenate([[True], np.diff(theta) > 1e-9])
+    theta, thd, thdd, t, q, qd, qdd = (a[keep] for a in (theta, thd, thdd, t, q, qd, qdd))
+    floor = thd < min_theta_dot
+    thd = np.where(floor, min_theta_dot, thd)
+    thdd = np.where(floor, 0.0, thdd)
+    return PathProfile(theta, thd, thdd, q, qd, qdd, t)
+
+
+def sine_trajectory(q0: np.ndarray, joint: int, peak_speed: float, amplitude: float = 0.3,
+                    cycles: float = 1.0, dt: float = 0.004032) -> TimeTrajectory:
+    """Single-joint motion q_j = q0_j + A (1 - cos(w t)), w = peak_speed / A (thesis §4.4).
+
+    Starts at rest, peak speed ``peak_speed`` [rad/s]; ``cycles`` periods 2 pi / w; the other
+    joints stay at q0 (3,) [rad]. ``joint`` is 0, 1 or 2.
+    """
+    if joint not in (0, 1, 2) or not peak_speed > 0 or not amplitude > 0 or not cycles > 0:
+        raise ProfileError('joint in 0..2, peak_speed > 0, amplitude > 0, cycles > 0')
+    w = peak_speed / amplitude
+    duration = cycles * 2 * np.pi / w
+    t = np.arange(0.0, duration + dt / 2, dt)
+    q = np.tile(np.asarray(q0, float), (len(t), 1))
+    qd = np.zeros_like(q)
+    qdd = np.zeros_like(q)
+    q[:, joint] += amplitude * (1 - np.cos(w * t))
+    qd[:, joint] = amplitude * w * np.sin(w * t)
+    qdd[:, joint] = amplitude * w**2 * np.cos(w * t)
+    qdd[-1, joint] = 0.0
+    return TimeTrajectory(t, q, qd, qdd)

@@ -1,0 +1,237 @@
+"""`ros2 run irb_control simulator`: the simulated IRB 1600 (thin adapter over plant.Plant).
+
+Publishes /joint_states every period (real time) or as fast as the controller answers
+(lockstep, with /clock), the camera's TCP point at 100 Hz, and applies /torque_command.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PointStamped
+from irb_description.model import RobotModel
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from .node_util import declare, state_qos
+from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
+
+
+def _stamp(t: float) -> Time:
+    sec = math.floor(t)
+    return Time(sec=int(sec), nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+
+
+def _seconds(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class SimulatorNode(Node):
+    """Plant in a node; ``run()`` is its loop (real time on the steady clock, or lockstep)."""
+
+    def __init__(self, **kwargs):
+        super().__init__('simulator', **kwargs)
+        d = PlantConfig()
+        p = {
+            'mode': declare(self, 'mode', 'realtime', "'realtime' (steady clock) or "
+                            "'lockstep' (simulated time on /clock, waits for each command)"),
+            'period_s': declare(self, 'period_s', d.period_s, 'sample period [s]'),
+            'substeps': declare(self, 'substeps', d.substeps, 'integration substeps per period'),
+            'delay_samples': declare(self, 'delay_samples', d.delay_samples,
+                                     'command-to-effect delay [samples]'),
+            'initial_positions': declare(self, 'initial_positions', list(d.initial_q),
+                                         'start pose of joints 1-3 [rad]'),
+            'command_timeout_s': declare(self, 'command_timeout_s', d.command_timeout_s,
+                                         'no command for longer: brakes [s]'),
+            'encoder_resolution_rad': declare(self, 'encoder_resolution_rad',
+                                              d.encoder_resolution_rad, 'quantum [rad]'),
+            'position_noise_rad': declare(self, 'position_noise_rad', d.position_noise_rad,
+                                          'encoder noise std [rad]'),
+            'velocity_noise_rad_s': declare(self, 'velocity_noise_rad_s',
+                                            d.velocity_noise_rad_s, 'speed noise std [rad/s]'),
+            'camera_period_s': declare(self, 'camera_period_s', d.camera_period_s,
+                                       'camera sample period [s]'),
+            'camera_noise_m': declare(self, 'camera_noise_m', d.camera_noise_m,
+                                      'camera noise std per axis [m]'),
+            'seed': declare(self, 'seed', d.seed, 'noise seed'),
+            'plant_friction_file': declare(self, 'plant_friction_file', '',
+                                           "plant friction YAML; '' = config/plant.yaml"),
+            'lockstep_wait_s': declare(self, 'lockstep_wait_s', 0.05,
+                                       'lockstep: wall time to wait for a command [s]'),
+            'stats_path': declare(self, 'stats_path', '',
+                                  "write loop statistics JSON here at exit ('' = no)"),
+        }
+        self.p = p
+        if p['mode'] not in ('realtime', 'lockstep'):
+            raise ValueError(f"mode must be 'realtime' or 'lockstep', not {p['mode']!r}")
+        model = RobotModel.load()
+        self.joint_names = model.joint_names
+        ffile = p['plant_friction_file'] or str(default_plant_yaml())
+        _, friction = load_plant_friction(ffile, model.joint_names)
+        self.config = PlantConfig(
+            period_s=p['period_s'], substeps=p['substeps'], delay_samples=p['delay_samples'],
+            initial_q=tuple(p['initial_positions']), command_timeout_s=p['command_timeout_s'],
+            encoder_resolution_rad=p['encoder_resolution_rad'],
+            position_noise_rad=p['position_noise_rad'],
+            velocity_noise_rad_s=p['velocity_noise_rad_s'],
+            camera_period_s=p['camera_period_s'], camera_noise_m=p['camera_noise_m'],
+            seed=p['seed'])
+        self.plant = Plant(model, friction, self.config)
+        self.lockstep = p['mode'] == 'lockstep'
+        self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
+        self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
+                                             QoSProfile(depth=50))
+        self.pub_clock = (self.create_publisher(Clock, '/clock', qos_profile_sensor_data)
+                          if self.lockstep else None)
+        self.create_subscription(JointState, 'torque_command', self.on_command, state_qos())
+        # loop statistics: state publish time per stamp, latency of the matching command
+        self._sent: dict[int, float] = {}
+        self._answered_k = -1
+        self._k = 0
+        self.latencies: list[float] = []
+        self.missed = 0
+        self.missed_run = 0
+        self.max_missed_run = 0
+        self.t_wall0 = time.monotonic()
+        self.get_logger().info(
+            f"simulator: {p['mode']}, T = {p['period_s']} s, {p['substeps']} substeps, delay "
+            f"{p['delay_samples']} samples, plant friction {ffile}")
+
+    # --- command -------------------------------------------------------------------------
+    def on_command(self, msg: JointState) -> None:
+        now = time.monotonic()
+        tau = _effort_by_name(msg, self.joint_names)
+        if tau is None:
+            self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
+                                   throttle_duration_sec=1.0)
+            return
+        self.plant.command(tau)
+        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        t_sent = self._sent.pop(key, None)
+        if t_sent is not None:
+            self.latencies.append(now - t_sent)
+            self._answered_k = self._k
+
+    # --- loop ----------------------------------------------------------------------------
+    def _publish_state(self, stamp: Time) -> None:
+        y = self.plant.measure()
+        msg = JointState()
+        msg.header.stamp = stamp
+        msg.name = self.joint_names
+        msg.position = y.q.tolist()
+        msg.velocity = y.qd.tolist()
+        msg.effort = y.tau.tolist()
+        key = stamp.sec * 1_000_000_000 + stamp.nanosec
+        self._sent = {key: time.monotonic()}      # only the latest state can be answered
+        self.pub_state.publish(msg)
+
+    def _after_step(self, stamp_of) -> None:
+        for t, text in self.plant.events:
+            self.get_logger().warn(f'[t = {t:.3f} s] {text}')
+        self.plant.events.clear()
+        for t, pt in self.plant.take_camera():
+            m = PointStamped()
+            m.header.stamp = stamp_of(t)
+            m.header.frame_id = 'base_link'
+            m.point.x, m.point.y, m.point.z = (float(v) for v in pt)
+            self.pub_cam.publish(m)
+
+    def _count_deadline(self) -> None:
+        """Called at each tick: was the state of the previous tick answered in time?"""
+        if self._k == 0 or self.plant.braked:
+            return      # nobody is controlling the robot: nothing to miss
+        if self._answered_k == self._k:
+            self.missed_run = 0
+        else:
+            self.missed += 1
+            self.missed_run += 1
+            self.max_missed_run = max(self.max_missed_run, self.missed_run)
+
+    def run(self, executor) -> None:
+        """Loop until shutdown."""
+        T = self.config.period_s
+        if self.lockstep:
+            while rclpy.ok(context=self.context):
+                t = self.plant.state.t
+                stamp = _stamp(t)
+                self.pub_clock.publish(Clock(clock=stamp))
+                self._publish_state(stamp)
+                deadline = time.monotonic() + self.p['lockstep_wait_s']
+                while self._answered_k != self._k and rclpy.ok(context=self.context):
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        break
+                    executor.spin_once(timeout_sec=left)
+                self._count_deadline()
+                self.plant.step()
+                self._k += 1
+                self._after_step(_stamp)
+            return
+        t0_ros = self.get_clock().now().nanoseconds * 1e-9
+        next_tick = time.monotonic()
+        while rclpy.ok(context=self.context):
+            now = time.monotonic()
+            if now < next_tick:
+                executor.spin_once(timeout_sec=next_tick - now)
+                continue
+            if self._k > 0:
+                self._count_deadline()
+                self.plant.step()
+            self._k += 1
+            stamp = self.get_clock().now().to_msg()
+            self._publish_state(stamp)
+            self._after_step(lambda t: _stamp(t0_ros + t))
+            next_tick += T
+            if time.monotonic() - next_tick > 10 * T:       # fell far behind: resynchronise
+                next_tick = time.monotonic() + T
+
+    def stats(self) -> dict:
+        lat = np.array(self.latencies) * 1e3
+        q = (lambda p: float(np.percentile(lat, p))) if lat.size else (lambda p: math.nan)
+        return {'mode': self.p['mode'], 'steps': self._k, 'answered': int(lat.size),
+                'latency_ms': {'p50': q(50), 'p99': q(99), 'max': float(lat.max())
+                               if lat.size else math.nan},
+                'missed_deadlines': self.missed, 'max_consecutive_missed': self.max_missed_run,
+                'sim_time_s': self.plant.state.t,
+                'wall_time_s': time.monotonic() - self.t_wall0,
+                'energy_j': self.plant.state.energy}
+
+
+def _effort_by_name(msg: JointState, names: list[str]) -> np.ndarray | None:
+    if len(msg.effort) < len(names):
+        return None
+    if msg.name and len(msg.name) == len(msg.effort):
+        idx = {n: i for i, n in enumerate(msg.name)}
+        if not all(n in idx for n in names):
+            return None
+        return np.array([msg.effort[idx[n]] for n in names], float)
+    return np.array(msg.effort[:len(names)], float)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = SimulatorNode()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        node.run(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node.p['stats_path']:
+            Path(node.p['stats_path']).write_text(json.dumps(node.stats(), indent=2))
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,124 @@
+"""Fake axis computer core: faults, command acceptance, miss -> brakes -> latched error."""
+import numpy as np
+import pytest
+
+from irb_control.axis_bridge_core import BridgeCore
+from irb_control.axis_protocol import (ERR_COMM_TIMEOUT, ERR_NONE, ERR_TORQUE_LIMIT,
+                                       MODE_IDLE, MODE_TORQUE, CommandPacket, decode_state,
+                                       encode_command)
+from irb_control.fake_axis_core import FakeAxisCore, FaultConfig
+from irb_control.plant import Plant, PlantConfig, PlantFriction
+
+
+@pytest.fixture
+def plant(model):
+    return Plant(model, PlantFriction.from_map(model.friction), PlantConfig(seed=3))
+
+
+def command(seq, tau=(0.0, 0.0, 0.0), reset=False):
+    t = np.zeros(6)
+    t[:3] = tau
+    return encode_command(CommandPacket(seq, 0, t, MODE_TORQUE, reset))
+
+
+def hold_torque(plant):
+    return plant.model.gravity(plant.state.q)
+
+
+def test_round_trip_holds_the_robot_against_gravity(plant):
+    core = FakeAxisCore(plant)
+    q0 = plant.state.q.copy()
+    for _ in range(100):
+        (offset, data), = core.begin_cycle()
+        state = decode_state(data)
+        assert offset == 0.0 and state.seq == core.seq
+        assert core.on_datagram(command(state.seq, hold_torque(plant)))
+        core.end_cycle()
+    assert core.error == ERR_NONE and core.missed_total == 0
+    assert not plant.braked
+    assert np.abs(plant.state.q - q0).max() < 1e-3
+    last = decode_state(core.begin_cycle()[0][1])
+    assert last.motors_on and last.mode == MODE_TORQUE
+
+
+def test_misses_engage_brakes_and_latch_until_reset(plant):
+    core = FakeAxisCore(plant, miss_limit=3)
+    for _ in range(5):
+        core.begin_cycle()
+        core.on_datagram(command(core.seq, hold_torque(plant)))
+        core.end_cycle()
+    for _ in range(3):                         # three cycles without an answer
+        core.begin_cycle()
+        core.end_cycle()
+    assert core.error == ERR_COMM_TIMEOUT and plant.braked
+    q_held = plant.state.q.copy()
+    state = decode_state(core.begin_cycle()[0][1])
+    assert state.error == ERR_COMM_TIMEOUT and state.mode == MODE_IDLE
+    assert not core.on_datagram(command(core.seq, hold_torque(plant)))   # ignored while latched
+    core.end_cycle()
+    np.testing.assert_allclose(plant.state.q, q_held)     # held on brakes, no sagging
+    core.begin_cycle()
+    assert core.on_datagram(command(core.seq, hold_torque(plant), reset=True))
+    assert core.error == ERR_NONE
+    assert any('reset' in e for e in core.events)
+
+
+def test_no_timeout_before_external_control_is_engaged(plant):
+    core = FakeAxisCore(plant, miss_limit=3)
+    for _ in range(20):                        # controller not started yet
+        core.begin_cycle()
+        core.end_cycle()
+    assert core.error == ERR_NONE and core.missed_total == 0 and plant.braked
+
+
+def test_wrong_sequence_and_garbage_are_rejected(plant):
+    core = FakeAxisCore(plant)
+    core.begin_cycle()
+    assert not core.on_datagram(command(core.seq - 1))
+    assert not core.on_datagram(b'garbage')
+    assert core.rejected == {'wrong_seq': 1, 'size': 1}
+
+
+def test_excessive_torque_latches_an_error(plant):
+    core = FakeAxisCore(plant)
+    core.begin_cycle()
+    assert not core.on_datagram(command(core.seq, (1e4, 0.0, 0.0)))
+    assert core.error & ERR_TORQUE_LIMIT and plant.braked
+
+
+@pytest.mark.parametrize('kind', ['drop', 'delay', 'duplicate', 'reorder', 'corrupt', 'nan'])
+def test_each_fault_kind_is_injected_and_handled_by_the_bridge(plant, kind):
+    core = FakeAxisCore(plant, FaultConfig(**{kind: 0.2, 'seed': 5}), miss_limit=1000)
+    bridge = BridgeCore()
+    now = 0.0
+    pending = []
+    for _ in range(300):
+        pending += [(now + off, d) for off, d in core.begin_cycle()]
+        pending.sort(key=lambda x: x[0])
+        due = [d for t, d in pending if t <= now + 1e-9]
+        pending = [(t, d) for t, d in pending if t > now + 1e-9]
+        for d in due:
+            state, _ = bridge.on_datagram(d, now)
+            if state is not None:
+                reply = bridge.on_command(np.concatenate([hold_torque(plant), np.zeros(3)]),
+                                          now + 5e-4)
+                if reply is not None:
+                    core.on_datagram(reply)
+        core.end_cycle()
+        now += plant.config.period_s
+    assert core.injected[kind] > 30
+    assert core.error == ERR_NONE
+    rejected = bridge.stats.rejected
+    expected = {'drop': None, 'delay': None, 'duplicate': 'duplicate', 'reorder': 'stale',
+                'corrupt': 'crc', 'nan': 'nan'}[kind]
+    if expected:
+        assert rejected[expected] > 0.5 * core.injected[kind], rejected
+    if kind in ('drop', 'delay', 'reorder', 'corrupt', 'nan'):
+        assert core.missed_total > 0           # those cycles got no valid answer in time
+
+
+def test_fault_config_validation():
+    with pytest.raises(ValueError):
+        FaultConfig(drop=1.5)
+    with pytest.raises(ValueError):
+        FaultConfig(delay_s=-1.0)

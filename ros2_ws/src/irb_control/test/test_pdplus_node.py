@@ -1,0 +1,151 @@
+"""pdplus node in-process: private Context, explicit executor, futures set in callbacks."""
+import os
+import uuid
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from irb_interfaces.msg import ControllerState  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.task import Future  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from irb_control.node_util import latched_qos, state_qos  # noqa: E402
+from irb_control.pdplus_node import PdPlusNode  # noqa: E402
+from irb_control.trajectory_io import theta_profile_msg  # noqa: E402
+from irb_control.profiles import polynomial_theta_of_time  # noqa: E402
+
+pytestmark = pytest.mark.ros
+T = 0.004032
+TIMEOUT = 30.0
+
+
+@pytest.fixture
+def graph():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    ns = f'/t{uuid.uuid4().hex[:8]}'
+    ctrl = PdPlusNode(context=ctx, namespace=ns, parameter_overrides=[
+        Parameter('executor', value='single')])
+    peer = rclpy.create_node('peer', namespace=ns, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ctrl)
+    ex.add_node(peer)
+    yield ctrl, peer, ex, ns
+    ex.shutdown()
+    ctrl.destroy_node()
+    peer.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+class Collector:
+    """Collects messages; ``wait(pred)`` completes a future when pred(msg) is true."""
+
+    def __init__(self, node, typ, topic, qos):
+        self.msgs = []
+        self.pred = None
+        self.future = None
+        node.create_subscription(typ, topic, self.cb, qos)
+
+    def cb(self, msg):
+        self.msgs.append(msg)
+        if self.future is not None and not self.future.done() and self.pred(msg):
+            self.future.set_result(msg)
+
+    def expect(self, pred):
+        """Future of the first message from now on with pred(msg)."""
+        self.pred = pred
+        self.future = Future()
+        return self.future
+
+
+def joint_state(stamp_s, q, qd=(0.0, 0.0, 0.0)):
+    m = JointState(name=['joint_1', 'joint_2', 'joint_3'], position=list(q), velocity=list(qd),
+                   effort=[0.0] * 3)
+    m.header.stamp.sec = int(stamp_s)
+    m.header.stamp.nanosec = int(round((stamp_s - int(stamp_s)) * 1e9))
+    return m
+
+
+def spin_for(ex, fut):
+    ex.spin_until_future_complete(fut, timeout_sec=TIMEOUT)
+    assert fut.done(), 'event did not happen within the timeout'
+    return fut.result()
+
+
+def test_command_answers_state_and_nan_is_rejected(graph):
+    ctrl, peer, ex, ns = graph
+    q0 = ctrl.ctrl.start_pose()
+    cmds = Collector(peer, JointState, f'{ns}/torque_command', state_qos())
+    states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
+    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
+    fut = cmds.expect(lambda m: m.header.stamp.sec == 100)
+    # publish until the (best-effort) subscription is matched and answered
+    timer = peer.create_timer(T, lambda: pub.publish(joint_state(100.0, q0)))
+    cmd = spin_for(ex, fut)
+    assert list(cmd.name) == ['joint_1', 'joint_2', 'joint_3']
+    g = ctrl.model.gravity(q0)
+    assert np.allclose(cmd.effort, g, atol=60.0)     # about gravity + friction FF at rest
+    peer.destroy_timer(timer)
+    n_cmds = len(cmds.msgs)
+    fut = states.expect(lambda m: m.rejected_inputs >= 1)
+    timer = peer.create_timer(T, lambda: pub.publish(joint_state(100.1, [np.nan, 0.0, 0.0])))
+    st = spin_for(ex, fut)
+    peer.destroy_timer(timer)
+    assert all(np.isfinite(c.effort).all() for c in cmds.msgs)
+    assert len(cmds.msgs) == n_cmds                   # no command for the NaN samples
+    assert st.mode != ControllerState.MODE_STOPPED or 'watchdog' in st.stop_reason
+
+
+def test_stop_enable_services_and_watchdog(graph):
+    ctrl, peer, ex, ns = graph
+    q0 = ctrl.ctrl.start_pose()
+    states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
+    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
+    k = [0]
+
+    def feed():
+        k[0] += 1
+        pub.publish(joint_state(10.0 + k[0] * T, q0))
+    timer = peer.create_timer(T, feed)
+    spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
+
+    stop = peer.create_client(Trigger, f'{ns}/pdplus/stop')
+    assert stop.wait_for_service(timeout_sec=TIMEOUT)
+    assert spin_for(ex, stop.call_async(Trigger.Request())).success
+    st = spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_STOPPED))
+    assert st.stop_reason == 'stop service'
+    n = len(states.msgs)
+    spin_for(ex, states.expect(lambda m: len(states.msgs) > n + 20))
+    assert states.msgs[-1].mode == ControllerState.MODE_STOPPED      # latched
+
+    enable = peer.create_client(Trigger, f'{ns}/pdplus/enable')
+    assert enable.wait_for_service(timeout_sec=TIMEOUT)
+    assert spin_for(ex, enable.call_async(Trigger.Request())).success
+    spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
+
+    # the joint states stop: the steady-clock watchdog latches a safe stop
+    peer.destroy_timer(timer)
+    st = spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_STOPPED
+                                    and 'watchdog' in m.stop_reason))
+    assert 'no valid joint_states' in st.stop_reason
+
+
+def test_theta_profile_from_planned_trajectory(graph):
+    ctrl, peer, ex, ns = graph
+    from trajectory_msgs.msg import JointTrajectory
+    pub = peer.create_publisher(JointTrajectory, f'{ns}/planned_trajectory', latched_qos())
+    t, th, thd, thdd = polynomial_theta_of_time(15.0, n=301)
+    pub.publish(theta_profile_msg(t, th, thd, thdd))
+    fut = Future()
+    old = ctrl.ctrl.profile
+    timer = peer.create_timer(0.01, lambda: fut.set_result(True)
+                              if ctrl.ctrl.profile is not old and not fut.done() else None)
+    spin_for(ex, fut)
+    peer.destroy_timer(timer)
+    prof = ctrl.ctrl.profile
+    assert prof.t[-1] == pytest.approx(15.0, abs=0.1)
+    assert np.max(prof.theta_dot) == pytest.approx(np.max(thd), rel=1e-3)

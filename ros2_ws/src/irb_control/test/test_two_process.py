@@ -1,0 +1,104 @@
+"""simulator + pdplus as two processes (`ros2 run`, lockstep on /clock): the robot follows the
+thesis circle; this test only listens (controller state and camera)."""
+import os
+import signal
+import subprocess
+import uuid
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import PointStamped  # noqa: E402
+from irb_interfaces.msg import ControllerState  # noqa: E402
+from irb_description.path import thesis_circle  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
+from rclpy.task import Future  # noqa: E402
+
+from irb_control.closed_loop import circle_distance  # noqa: E402
+from irb_control.node_util import state_qos  # noqa: E402
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def _stop(proc):
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture
+def processes():
+    ns = f'/tp{uuid.uuid4().hex[:8]}'
+    common = ['--ros-args', '-r', f'__ns:={ns}']
+    sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
+                            '-p', 'mode:=lockstep'],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
+                             '-p', 'use_sim_time:=true', '-p', 'friction_mode:=nominal',
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=false'],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    yield ns, sim, ctrl
+    _stop(ctrl)
+    _stop(sim)
+
+
+def test_robot_follows_circle_across_processes(processes):
+    ns, sim, ctrl = processes
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    node = rclpy.create_node(f'listener_{uuid.uuid4().hex[:6]}', context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        done = Future()
+        states, cams = [], []
+
+        def on_state(m):
+            states.append(m)
+            if m.mode in (ControllerState.MODE_HOLD, ControllerState.MODE_STOPPED) \
+                    and not done.done():
+                done.set_result(m)
+        node.create_subscription(ControllerState, f'{ns}/controller_state', on_state,
+                                 state_qos())
+        node.create_subscription(PointStamped, f'{ns}/camera/tcp', cams.append,
+                                 QoSProfile(depth=200))
+        # start the motion once this listener is connected: enable service of pdplus
+        from std_srvs.srv import Trigger
+        enable = node.create_client(Trigger, f'{ns}/pdplus/enable')
+        assert enable.wait_for_service(timeout_sec=60.0), 'pdplus did not come up'
+        first = Future()
+        node.create_timer(0.05, lambda: first.set_result(True) if states and cams
+                          and not first.done() else None)
+        ex.spin_until_future_complete(first, timeout_sec=60.0)
+        assert first.done(), 'no controller state / camera messages'
+        fut = enable.call_async(Trigger.Request())
+        ex.spin_until_future_complete(fut, timeout_sec=30.0)
+        assert fut.done() and fut.result().success, fut.result()
+        ex.spin_until_future_complete(done, timeout_sec=120.0)
+        assert done.done(), 'no end of motion within 120 s'
+        final = done.result()
+        assert final.mode == ControllerState.MODE_HOLD, final.stop_reason
+        path_states = [s for s in states if s.mode == ControllerState.MODE_PATH]
+        assert len(path_states) > 1500                      # ~2480 samples in 10 s
+        theta = np.array([s.theta for s in path_states])
+        assert theta.max() > 6.2
+        t0 = path_states[0].header.stamp.sec + path_states[0].header.stamp.nanosec * 1e-9
+        pts = np.array([[c.point.x, c.point.y, c.point.z] for c in cams
+                        if c.header.stamp.sec + c.header.stamp.nanosec * 1e-9 > t0])
+        assert len(pts) > 500
+        err = circle_distance(thesis_circle(), pts)
+        assert np.mean(err) < 1.5e-3 and np.max(err) < 4e-3
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        _stop(ctrl)
+        _stop(sim)
+    assert sim.wait(timeout=20) == 0, sim.stdout.read()
+    assert ctrl.wait(timeout=20) == 0, ctrl.stdout.read()

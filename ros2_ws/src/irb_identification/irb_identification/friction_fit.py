@@ -1,0 +1,263 @@
+"""Friction maps from constant-speed experiments (thesis §4.2, eq. 4.8). No rclpy.
+
+Per joint: eq. 4.8 points (segments.py) -> a parametric Coulomb + viscous + Stribeck fit
+tau_f(v) = sign(v) (F_c + (F_s - F_c) exp(-(v/v_s)^2)) + F_v v (scipy least_squares, 95 %
+confidence half-widths from the Jacobian and the t distribution) and polynomials of order 5-7
+in v for each sign (weighted by 1/|tau_f|, i.e. relative error), valid over the sampled speed
+range. The result is an irb_description ``JointFriction``/``FrictionMap`` (schema in
+irb_description/friction.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from irb_description.friction import FrictionMap, JointFriction
+from numpy.polynomial import Polynomial
+from scipy import stats
+from scipy.optimize import least_squares
+
+from .segments import SegmentConfig, SpeedPoint, find_segments, speed_points
+from .series import JointSeries
+
+PARAMS = ('coulomb', 'static', 'stribeck_velocity', 'viscous')
+
+
+class IdentificationError(ValueError):
+    """A joint cannot be identified; the message names the reason."""
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """poly_order: 5-7, or 0 to pick the order in 5-7 with the smallest leave-one-out
+    relative error; min_speeds: fewest distinct speeds to identify a joint (parametric
+    fit has 4 parameters); pair_rel_tol: |speed| agreement for pairing +c/-c segments."""
+
+    poly_order: int = 7
+    min_speeds: int = 4
+    pair_rel_tol: float = 0.1
+    segments: SegmentConfig = field(default_factory=SegmentConfig)
+
+
+@dataclass(frozen=True)
+class ParametricFit:
+    """Fitted parameters (F_c, F_s [N m], v_s [rad/s], F_v [N m s/rad]), their 95 %
+    half-widths (nan where not identifiable), RMS residual [N m], degrees of freedom."""
+
+    coulomb: float
+    static: float
+    stribeck_velocity: float
+    viscous: float
+    ci95: dict
+    rmse: float
+    dof: int
+    cov: np.ndarray | None = None     # (4, 4) of (F_c, F_s - F_c, v_s, F_v), nan if fixed
+
+    def band95(self, v: np.ndarray) -> np.ndarray:
+        """95 % half-width [N m] of the fitted curve at speeds v (delta method)."""
+        v = np.asarray(v, float)
+        if self.cov is None or self.dof <= 0:
+            return np.full(v.shape, np.nan)
+        x = np.array([self.coulomb, self.static - self.coulomb, self.stribeck_velocity,
+                      self.viscous])
+        J = np.empty(v.shape + (4,))
+        for k in range(4):
+            dx = np.zeros(4)
+            dx[k] = 1e-6 * max(abs(x[k]), 1e-3)
+            J[..., k] = (_parametric(v, *(x + dx)) - _parametric(v, *(x - dx))) / (2 * dx[k])
+        cov = np.nan_to_num(self.cov)
+        var = np.einsum('...i,ij,...j->...', J, cov, J)
+        return stats.t.ppf(0.975, self.dof) * np.sqrt(np.abs(var))
+
+    def torque(self, v: np.ndarray) -> np.ndarray:
+        return _parametric(np.asarray(v, float), self.coulomb, self.static - self.coulomb,
+                           self.stribeck_velocity, self.viscous)
+
+
+@dataclass(frozen=True)
+class JointResult:
+    """Identification of one joint: points, fits, the map entry, warnings; or ``error``."""
+
+    name: str
+    points: list[SpeedPoint]
+    parametric: ParametricFit | None = None
+    poly_pos: np.ndarray | None = None       # increasing powers of v
+    poly_neg: np.ndarray | None = None
+    friction: JointFriction | None = None
+    warnings: list[str] = field(default_factory=list)
+    error: str | None = None
+
+
+def _parametric(v, fc, ds, vs, fv):
+    return np.sign(v) * (fc + ds * np.exp(-(v / vs) ** 2)) + fv * v
+
+
+def fit_parametric(v: np.ndarray, tau: np.ndarray) -> ParametricFit:
+    """Coulomb + viscous + Stribeck fit to signed speeds v (m,) [rad/s], tau_f (m,) [N m].
+
+    Least squares in x = (F_c, F_s - F_c, v_s, F_v) with F_c, F_s - F_c >= 0 and
+    v_s in [1e-3, 10] rad/s; multi-start over v_s. Covariance s^2 (J^T J)^-1.
+    """
+    v, tau = np.asarray(v, float), np.asarray(tau, float)
+    if len(v) < 5:
+        raise IdentificationError(f'{len(v)} points are too few for a 4-parameter fit')
+    speed, mag = np.abs(v), np.abs(tau)
+    upper = speed >= np.median(speed)
+    fv0, fc0 = np.polyfit(speed[upper], mag[upper], 1) if upper.sum() >= 2 else (0.0, mag.mean())
+    fc0, fv0 = max(fc0, 0.0), max(fv0, 0.0)
+    ds0 = max(0.0, float(np.max(mag[speed <= np.min(speed) * 1.01] - fc0)))
+
+    def resid(x):
+        return _parametric(v, *x) - tau
+
+    best = None
+    for vs0 in (0.01, 0.05, 0.2, 0.5):
+        x0 = [fc0, ds0, vs0, fv0]
+        r = least_squares(resid, x0, bounds=([0, 0, 1e-3, -np.inf], [np.inf, np.inf, 10, np.inf]),
+                          x_scale=[max(fc0, 1.0), max(ds0, 1.0), vs0, max(fv0, 1.0)])
+        if best is None or r.cost < best.cost:
+            best = r
+    x, J = best.x, best.jac
+    dof = len(v) - 4
+    rmse = float(np.sqrt(2 * best.cost / max(dof, 1)))
+    ci = {}
+    cov = None
+    # parameters at a bound (e.g. no Stribeck dip) are not identifiable: no half-width
+    active = best.active_mask != 0
+    if dof > 0:
+        free = ~active
+        cov = np.full((4, 4), np.nan)
+        Jf = J[:, free]
+        try:
+            cov_f = np.linalg.inv(Jf.T @ Jf) * rmse**2
+            cov[np.ix_(free, free)] = cov_f
+        except np.linalg.LinAlgError:
+            pass
+        half = stats.t.ppf(0.975, dof) * np.sqrt(np.abs(np.diag(cov)))
+        # F_s = F_c + ds: var(F_s) = var(F_c) + var(ds) + 2 cov
+        var_fs = cov[0, 0] + cov[1, 1] + 2 * cov[0, 1]
+        hw = {'coulomb': half[0], 'static': stats.t.ppf(0.975, dof) * np.sqrt(abs(var_fs)),
+              'stribeck_velocity': half[2], 'viscous': half[3]}
+        ci = {k: float(val) for k, val in hw.items() if np.isfinite(val)}
+    return ParametricFit(float(x[0]), float(x[0] + x[1]), float(x[2]), float(x[3]), ci,
+                         rmse, dof, cov)
+
+
+def fit_polynomial(v: np.ndarray, tau: np.ndarray, order: int) -> np.ndarray:
+    """Polynomial coefficients (order + 1,) in increasing powers of v [rad/s] -> tau_f [N m],
+    least squares weighted by 1/|tau_f| (relative error)."""
+    v, tau = np.asarray(v, float), np.asarray(tau, float)
+    w = 1.0 / np.maximum(np.abs(tau), 1e-3 * np.max(np.abs(tau)) + 1e-9)
+    p = Polynomial.fit(v, tau, order, w=w)
+    return p.convert().coef
+
+
+def _loo_error(v: np.ndarray, tau: np.ndarray, order: int) -> float:
+    """Largest leave-one-out relative error of a polynomial fit (interior points only)."""
+    errs = []
+    for i in range(1, len(v) - 1):
+        keep = np.arange(len(v)) != i
+        p = fit_polynomial(v[keep], tau[keep], order)
+        errs.append(abs(np.polynomial.polynomial.polyval(v[i], p) - tau[i]) / abs(tau[i]))
+    return float(max(errs)) if errs else np.inf
+
+
+def choose_order(v: np.ndarray, tau: np.ndarray, requested: int = 0) -> int | None:
+    """Polynomial order: ``requested`` (5-7) or the best of 5-7 by leave-one-out; None if
+    fewer than order + 2 points."""
+    orders = [requested] if requested else [5, 6, 7]
+    orders = [o for o in orders if len(v) >= o + 2]
+    if not orders:
+        return None
+    if len(orders) == 1:
+        return orders[0]
+    return min(orders, key=lambda o: _loo_error(v, tau, o))
+
+
+def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = FitConfig(),
+                    warnings: list[str] | None = None) -> JointResult:
+    """Fits and the JointFriction of one joint from its eq. 4.8 points."""
+    warnings = list(warnings or [])
+    if len(points) < config.min_speeds:
+        return JointResult(name, points, warnings=warnings, error=(
+            f'{name}: {len(points)} usable speed(s), need at least {config.min_speeds} '
+            f'(each needs a +c and a -c constant-speed segment)'))
+    c = np.array([p.speed for p in points])
+    f_pos = np.array([p.f_pos for p in points])
+    f_neg = np.array([p.f_neg for p in points])
+    par = fit_parametric(np.concatenate([c, -c]), np.concatenate([f_pos, f_neg]))
+    poly_pos = poly_neg = None
+    order_pos = choose_order(c, f_pos, config.poly_order)
+    order_neg = choose_order(-c, f_neg, config.poly_order)
+    if order_pos and order_neg:
+        poly_pos = fit_polynomial(c, f_pos, order_pos)
+        poly_neg = fit_polynomial(-c, f_neg, order_neg)
+        worst = max(np.max(np.abs(np.polynomial.polynomial.polyval(c, poly_pos) - f_pos)
+                           / np.abs(f_pos)),
+                    np.max(np.abs(np.polynomial.polynomial.polyval(-c, poly_neg) - f_neg)
+                           / np.abs(f_neg)))
+        if worst > 0.05:
+            warnings.append(f'{name}: polynomials miss a point by {100 * worst:.1f} % '
+                            f'(the parametric fit by {100 * par.rmse / np.mean(np.abs(f_pos)):.1f}'
+                            f' % RMS)')
+    else:
+        warnings.append(f'{name}: {len(points)} speeds are too few for a polynomial of order '
+                        f'{config.poly_order or 5}: parametric model only')
+    jf = JointFriction(
+        coulomb=par.coulomb, static=par.static, stribeck_velocity=par.stribeck_velocity,
+        viscous=par.viscous, valid_range=(float(c.min()), float(c.max())),
+        polynomial_positive=None if poly_pos is None else tuple(float(x) for x in poly_pos),
+        polynomial_negative=None if poly_neg is None else tuple(float(x) for x in poly_neg),
+        ci95=par.ci95)
+    return JointResult(name, points, par, poly_pos, poly_neg, jf, warnings)
+
+
+def identify_series(series_list: list[JointSeries], joint_names: list[str],
+                    config: FitConfig = FitConfig(), model=None) -> list[JointResult]:
+    """Identify every joint of ``joint_names`` from one or more JointSeries (one per bag).
+
+    ``model`` (irb_description RobotModel), optional: per-sign friction compensated by the
+    model's M qdd + C qd + g on each segment (keeps an asymmetry eq. 4.8 averages away);
+    eq. 4.8's tau_f is computed either way.
+    """
+    segs = {j: [] for j in range(len(joint_names))}
+    mt = None
+    if model is not None:
+        def mt(q, qd):
+            zero = np.zeros(q.shape[1])
+            return np.array([model.inverse_dynamics(a, b, zero) for a, b in zip(q, qd)])
+    for s in series_list:
+        s = s.select(joint_names)
+        for j in segs:
+            segs[j].extend(find_segments(s, j, config.segments, mt))
+    results = []
+    for j, name in enumerate(joint_names):
+        if not segs[j]:
+            results.append(JointResult(name, [], error=(
+                f'{name}: no constant-speed segments (joint never held a constant speed '
+                f'with the other joints still)')))
+            continue
+        points, warnings = speed_points(segs[j], config.pair_rel_tol)
+        results.append(identify_points(name, points, config, warnings))
+    return results
+
+
+def friction_map(results: list[JointResult], source: str,
+                 fill: FrictionMap | None = None) -> FrictionMap:
+    """FrictionMap of the identified joints; failed joints from ``fill`` if given, else left
+    out. Raises IdentificationError if nothing is left."""
+    names, joints = [], []
+    for r in results:
+        if r.friction is not None:
+            names.append(r.name)
+            joints.append(r.friction)
+        elif fill is not None:
+            names.append(r.name)
+            joints.append(fill.joints[fill.joint_names.index(r.name)])
+    if not joints:
+        raise IdentificationError('no joint could be identified: ' + '; '.join(
+            r.error or '' for r in results))
+    missing = [r.name for r in results if r.friction is None]
+    if missing and fill is not None:
+        source += f' (not identified, from {fill.source}: {", ".join(missing)})'
+    return FrictionMap(tuple(names), tuple(joints), source)

@@ -1,0 +1,146 @@
+"""recorder: record topics into a crash-safe rosbag2 MCAP bag (bags/<name>/).
+
+    ros2 run irb_identification recorder --ros-args -p name:=run1
+"""
+from __future__ import annotations
+
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from .bagio import BagExistsError, BagWriter, TopicInfo, needs_recovery, recover_bag
+from .rosutil import default_bag_root, message_class, qos_to_dict, subscription_qos
+
+DEFAULT_TOPICS = ['/joint_states', '/torque_command', '/controller_state', '/camera/tcp']
+
+
+class RecorderNode(Node):
+    """Subscribes raw to the chosen topics and writes their CDR bytes to a BagWriter."""
+
+    def __init__(self, node_name: str = 'recorder', **kwargs):
+        super().__init__(node_name, **kwargs)
+
+        def param(name, default, text):
+            return self.declare_parameter(name, default, ParameterDescriptor(
+                description=text)).value
+
+        root = param('root', '', 'bag root directory; empty: $IRB_ROOT/bags or ./bags')
+        name = param('name', '', 'bag name; empty: rec_<date>_<time>')
+        self.topics = list(param('topics', DEFAULT_TOPICS, 'topics to record'))
+        types = list(param('types', [''], "message type per topic ('' = from the graph)"))
+        split = param('split_period_s', 1.5, '[s] close a split file this often (crash loss)')
+        chunk = param('chunk_size_kib', 64, '[KiB] MCAP chunk size')
+        compression = param('compression', 'none', "'none' or 'zstd' (chunk compression)")
+        self.depth = param('queue_depth', 1000, 'subscription queue depth [messages]')
+        discovery = param('discovery_period_s', 0.5, '[s] look for missing topics this often')
+        progress = param('progress_period_s', 2.0, '[s] progress report period; 0 = off')
+        recover = param('recover_on_start', True,
+                        'recover bags in root left incomplete by a killed recorder')
+
+        self.root = Path(root) if root else default_bag_root()
+        self.root.mkdir(parents=True, exist_ok=True)
+        if recover:
+            self._recover_leftovers()
+        name = name or datetime.now().strftime('rec_%Y%m%d_%H%M%S')
+        self.given_types = {t: ty for t, ty in zip(self.topics, types) if ty}
+        self.writer = BagWriter(self.root / name, split_period_s=split,
+                                chunk_size=int(chunk) * 1024, compression=compression,
+                                custom_data={'recorder': 'irb_identification'})
+        self.bag_path = self.writer.path
+        self.subs = {}
+        self._t0 = time.monotonic()
+        self._last = (self._t0, 0)
+        self._check_topics()
+        self.create_timer(discovery, self._check_topics)
+        self.create_timer(0.1, self._housekeeping)
+        if progress > 0:
+            self.create_timer(progress, self._progress)
+        self.get_logger().info(f'recording {self.topics} into {self.bag_path}')
+
+    def _recover_leftovers(self) -> None:
+        for bag in sorted(p for p in self.root.iterdir() if p.is_dir()):
+            if list(bag.glob('*.mcap*')) and needs_recovery(bag):
+                rep = recover_bag(bag)
+                self.get_logger().warn(
+                    f'recovered {bag}: {rep.salvaged_messages} messages salvaged from '
+                    f'{rep.salvaged_files}; {"; ".join(rep.problems) or "no problems"}')
+
+    def _check_topics(self) -> None:
+        pending = [t for t in self.topics if t not in self.subs]
+        if not pending:
+            return
+        graph = dict(self.get_topic_names_and_types())
+        for topic in pending:
+            msgtype = self.given_types.get(topic) or (graph.get(topic) or [None])[0]
+            if msgtype is None:
+                continue
+            pubs = self.get_publishers_info_by_topic(topic)
+            info = TopicInfo.for_type(topic, msgtype, [qos_to_dict(p.qos_profile)
+                                                       for p in pubs])
+            self.writer.add_topic(info)
+            self.subs[topic] = self.create_subscription(
+                message_class(msgtype), topic, self._callback(topic),
+                subscription_qos(pubs, self.depth), raw=True)
+            self.get_logger().info(f'subscribed to {topic} [{msgtype}]')
+
+    def _callback(self, topic: str):
+        write = self.writer.write
+        clock = self.get_clock()
+
+        def cb(data: bytes) -> None:
+            write(topic, clock.now().nanoseconds, data)
+        return cb
+
+    def _housekeeping(self) -> None:
+        if not self.writer.maybe_split():
+            self.writer.flush()
+
+    def _progress(self) -> None:
+        now = time.monotonic()
+        n = self.writer.message_count
+        rate = (n - self._last[1]) / max(now - self._last[0], 1e-9)
+        self._last = (now, n)
+        per = ', '.join(f'{t} {c}' for t, c in self.writer.counts.items())
+        missing = [t for t in self.topics if t not in self.subs]
+        self.get_logger().info(
+            f'{n} msgs, {rate:.0f} msg/s, {self.writer.bytes_written / 2**20:.2f} MiB, '
+            f'{len(self.writer.files)} files, {now - self._t0:.0f} s'
+            + (f' | {per}' if per else '') + (f' | waiting for {missing}' if missing else ''))
+
+    def close(self) -> None:
+        self.writer.close()
+        text = (f'closed {self.bag_path}: {self.writer.message_count} messages in '
+                f'{len(self.writer.files)} files')
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:                              # after Ctrl-C the rosout publisher is gone
+            print(f'[recorder] {text}', file=sys.stderr)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    try:
+        node = RecorderNode()
+    except BagExistsError as exc:
+        print(f'recorder: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

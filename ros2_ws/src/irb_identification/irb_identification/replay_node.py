@@ -1,0 +1,113 @@
+"""replay: publish a bag's messages on their topics at recorded speed or a rate factor.
+
+    ros2 run irb_identification replay --ros-args -p bag:=bags/run1 -p rate:=2.0 -p clock:=true
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from .bagio import BagError, bag_topics, iter_messages, topic_qos
+from .playback import play
+from .rosutil import message_class, qos_from_dicts
+
+
+class ReplayNode(Node):
+    """Publishers for the bag's topics; ``run`` plays the bag (in a thread in main)."""
+
+    def __init__(self, **kwargs):
+        super().__init__('replay', **kwargs)
+
+        def param(name, default, text):
+            return self.declare_parameter(name, default, ParameterDescriptor(
+                description=text)).value
+
+        self.bag = param('bag', '', 'bag directory to play (required)')
+        self.rate = float(param('rate', 1.0, 'speed factor; 0 = as fast as possible'))
+        self.clock_on = param('clock', False, 'publish /clock (rosgraph_msgs/Clock) bag time')
+        self.clock_hz = float(param('clock_frequency_hz', 100.0, '[Hz] /clock rate, bag time'))
+        only = [t for t in param('topics', [''], "topics to play ('' = all)") if t]
+        self.wait_subs = int(param('wait_for_subscribers', 0,
+                                   'wait until every topic has this many subscribers'))
+        self.wait_timeout = float(param('wait_timeout_s', 10.0, '[s] limit of that wait'))
+        self.start_delay = float(param('start_delay_s', 0.2, '[s] pause before playing'))
+        if not self.bag:
+            raise BagError('parameter bag is required (a bag directory)')
+        types = bag_topics(self.bag)
+        qos = topic_qos(self.bag)
+        missing = sorted(set(only) - set(types))
+        if missing:
+            raise BagError(f'bag {self.bag}: topic(s) {missing} not recorded')
+        self.pubs = {t: self.create_publisher(message_class(ty), t,
+                                              qos_from_dicts(qos.get(t, [])))
+                     for t, ty in types.items() if not only or t in only}
+        self.clock_pub = None
+        if self.clock_on:
+            from rosgraph_msgs.msg import Clock
+            self.clock_pub = self.create_publisher(Clock, '/clock', 10)
+        self.stop = threading.Event()
+        self.done = threading.Event()
+        self.stats = None
+
+    def _wait_for_subscribers(self) -> None:
+        deadline = time.monotonic() + self.wait_timeout
+        while (self.wait_subs > 0 and time.monotonic() < deadline and not self.stop.is_set()
+               and any(p.get_subscription_count() < self.wait_subs
+                       for p in self.pubs.values())):
+            self.stop.wait(0.02)
+
+    def _publish_clock(self, t_ns: int) -> None:
+        from rosgraph_msgs.msg import Clock
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(t_ns, 1_000_000_000)
+        self.clock_pub.publish(msg)
+
+    def run(self) -> None:
+        """Play the bag once; sets ``done``."""
+        try:
+            self._wait_for_subscribers()
+            self.stop.wait(self.start_delay)
+            msgs = (m for m in iter_messages(self.bag) if m[0] in self.pubs)
+            self.get_logger().info(f'playing {self.bag} at rate {self.rate or "max"}')
+            self.stats = play(
+                msgs, lambda topic, data: self.pubs[topic].publish(data), self.rate,
+                clock=self._publish_clock if self.clock_pub else None,
+                clock_period_ns=int(1e9 / self.clock_hz), stop=self.stop)
+            self.get_logger().info(
+                f'played {self.stats.messages} messages, {self.stats.bag_span_s:.2f} s of '
+                f'bag in {self.stats.wall_s:.2f} s')
+        finally:
+            self.done.set()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    try:
+        node = ReplayNode()
+    except BagError as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 1
+    player = threading.Thread(target=node.run, daemon=True)
+    player.start()
+    try:
+        while rclpy.ok() and not node.done.is_set():
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.stop.set()
+        player.join(timeout=5.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,272 @@
+"""recorder and replay in-process (private Context), and the recorder under SIGKILL."""
+import signal
+import subprocess
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from irb_identification import bagio  # noqa: E402
+from irb_identification.offline_sim import SimConfig, run_experiments  # noqa: E402
+from irb_identification.recorder_node import RecorderNode  # noqa: E402
+from irb_identification.replay_node import ReplayNode  # noqa: E402
+from irb_identification.series import read_joint_series  # noqa: E402
+
+pytestmark = pytest.mark.ros
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+
+
+@pytest.fixture
+def ctx(domain_id):
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    executor = SingleThreadedExecutor(context=context)
+    yield context, executor
+    executor.shutdown()
+    rclpy.try_shutdown(context=context)
+
+
+def spin_until(executor, cond, timeout=30.0):
+    """spin_once until cond() or timeout; returns cond()."""
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.05)
+    return cond()
+
+
+def joint_state(k):
+    m = JointState()
+    m.header.stamp.sec, m.header.stamp.nanosec = 1000 + k // 248, (k % 248) * 4_032_000
+    m.name = ['joint_1', 'joint_2', 'joint_3']
+    m.position = [float(k), 0.5, -0.5]
+    m.velocity = [0.1, 0.2, 0.3]
+    m.effort = [1.0, 2.0, float(k)]
+    return m
+
+
+def params(**kw):
+    from rclpy.parameter import Parameter
+    return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+def test_config_matches_declared_defaults(ctx, tmp_path):
+    """config/*.yaml carries the same values the nodes declare."""
+    context, _ = ctx
+    rec = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='cfg'))
+    conf = yaml.safe_load((CONFIG / 'recorder.yaml').read_text())['recorder']['ros__parameters']
+    for k, v in conf.items():
+        if k not in ('root', 'name'):
+            assert rec.get_parameter(k).value == v or list(rec.get_parameter(k).value) == v, k
+    rec.close()
+    rec.destroy_node()
+    conf = yaml.safe_load((CONFIG / 'replay.yaml').read_text())['replay']['ros__parameters']
+    assert set(conf) >= {'bag', 'rate', 'clock', 'topics'}
+    from irb_identification.experiments import ExperimentsNode
+    exp = ExperimentsNode(context=context)
+    conf = yaml.safe_load((CONFIG / 'experiments.yaml').read_text())['experiments'][
+        'ros__parameters']
+    for k, v in conf.items():
+        got = exp.get_parameter(k).value
+        assert (list(got) if isinstance(got, (list, tuple)) or hasattr(got, 'tolist')
+                else got) == v, k
+    exp.destroy_node()
+
+
+def test_experiments_offline_then_identify(tmp_path, bag_check, domain_id):
+    """The experiments executable (offline) writes one bag per run; identify reads them."""
+    from irb_identification import experiments, identify
+    rc = experiments.main(['--ros-args', '-p', f'root:={tmp_path}', '-p', 'prefix:=e',
+                           '-p', 'joints:=[joint_2]', '-p', 'speeds_rad_s:=[0.1, 0.5, 1.0, 1.5]'])
+    assert rc == 0
+    bags = sorted(tmp_path.glob('e_joint_2_*'))
+    assert [b.name for b in bags] == ['e_joint_2_0p1000', 'e_joint_2_0p5000',
+                                      'e_joint_2_1p0000', 'e_joint_2_1p5000']
+    for b in bags:
+        bag_check(b, decode_limit=20)
+    out = tmp_path / 'map.yaml'
+    assert identify.main(sum((['--bag', str(b)] for b in bags), [])
+                         + ['--out', str(out), '--no-plots']) == 2     # joints 1, 3 missing
+    from irb_description.friction import load_friction_map
+    assert load_friction_map(out).joint_names == ('joint_2',)
+
+
+def test_record_then_replay_round_trip(ctx, tmp_path, bag_check):
+    """Publish JointState + PointStamped, record raw, then replay the bag (rate 0 and 2) and
+    record the replay again: identical payloads, with /clock."""
+    from geometry_msgs.msg import PointStamped
+    from rosgraph_msgs.msg import Clock
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    js_topic, cam_topic = f'/js_{tag}', f'/cam_{tag}'
+    pub_node = rclpy.create_node(f'pub_{tag}', context=context)
+    be = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    pub = pub_node.create_publisher(JointState, js_topic, be)
+    cam = pub_node.create_publisher(PointStamped, cam_topic, 10)
+    rec = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='live', topics=[js_topic, cam_topic, '/never_published'],
+        progress_period_s=0.5, split_period_s=0.3))
+    executor.add_node(pub_node)
+    executor.add_node(rec)
+    assert spin_until(executor, lambda: pub.get_subscription_count() > 0
+                      and cam.get_subscription_count() > 0), 'recorder did not subscribe'
+    sent = 0
+
+    def tick():
+        nonlocal sent
+        pub.publish(joint_state(sent))
+        if sent % 10 == 0:
+            p = PointStamped()
+            p.point.x = float(sent)
+            cam.publish(p)
+        sent += 1
+    timer = pub_node.create_timer(1 / 248, tick)
+    assert spin_until(executor, lambda: rec.writer.counts.get(js_topic, 0) >= 300)
+    timer.cancel()
+    n_js = rec.writer.counts[js_topic]
+    # let in-flight messages arrive (bounded, condition-based)
+    spin_until(executor, lambda: rec.writer.counts[js_topic] >= sent, timeout=2.0)
+    with pytest.raises(bagio.BagExistsError):
+        RecorderNode(context=context, parameter_overrides=params(
+            root=str(tmp_path), name='live', topics=[js_topic]))
+    executor.remove_node(rec)
+    rec.close()
+    rec.destroy_node()
+    counts = bag_check(tmp_path / 'live')
+    assert counts[js_topic] >= n_js >= 300 and counts[cam_topic] >= 25
+    assert len(yaml.safe_load((tmp_path / 'live' / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']['relative_file_paths']) >= 2
+    series = read_joint_series(tmp_path / 'live', js_topic)
+    ks = series.position[:, 0]
+    assert np.all(np.diff(ks) > 0)             # in order, no duplicates
+    np.testing.assert_allclose(series.effort[:, 2], ks)
+    qos = bagio.topic_qos(tmp_path / 'live')[js_topic]
+    assert qos[0]['reliability'] == 'best_effort'
+
+    # --- replay into a second recorder, as fast as possible, with /clock
+    rec2 = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='replayed', topics=[js_topic, '/clock'],
+        types=['sensor_msgs/msg/JointState', 'rosgraph_msgs/msg/Clock'],
+        progress_period_s=0.0))
+    clocks = []
+    pub_node.create_subscription(Clock, '/clock', clocks.append, 100)
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bag=str(tmp_path / 'live'), rate=0.0, clock=True, topics=[js_topic],
+        wait_for_subscribers=1, start_delay_s=0.3))
+    executor.add_node(rec2)
+    executor.add_node(player)
+    import threading
+    th = threading.Thread(target=player.run)
+    th.start()
+    total = counts[js_topic]
+    got = spin_until(executor, lambda: rec2.writer.counts[js_topic] >= total, timeout=30)
+    th.join(timeout=30)
+    assert player.stats.messages == total
+    executor.remove_node(rec2)
+    rec2.close()
+    assert got, f'replayed {rec2.writer.counts[js_topic]} of {total}'
+    live = bagio.read_messages(tmp_path / 'live', [js_topic])[js_topic]
+    stamps = [c.clock.sec * 10**9 + c.clock.nanosec for c in clocks]
+    assert stamps and live.t_ns[0] <= stamps[0] and stamps[-1] <= live.t_ns[-1]
+    assert np.all(np.diff(stamps) >= 10_000_000)           # 100 Hz of bag time
+    a = live.data
+    b = bagio.read_messages(tmp_path / 'replayed', [js_topic])[js_topic].data
+    assert a == b                              # raw bytes survive record -> replay -> record
+    bag_check(tmp_path / 'replayed')
+    for n in (player, rec2, pub_node):
+        n.destroy_node()
+
+
+def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
+    """rate 2 plays a 1.2 s bag in about 0.6 s of wall time."""
+    context, executor = ctx
+    from irb_identification.profiles import ConstantVelocityProfile
+    import irb_identification.offline_sim as osim
+    prof = ConstantVelocityProfile(0.5, 8.0, 0.3, settle_s=0.1)
+    run = osim.simulate(model, model.friction, prof, 0)
+    bag = osim.write_run_bag(run, tmp_path / 'sim', model.joint_names)
+    bag_check(bag)
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bag=str(bag), rate=2.0, start_delay_s=0.0))
+    player.run()
+    s = player.stats
+    assert s.messages == len(run.t)
+    assert s.wall_s == pytest.approx(s.bag_span_s / 2, abs=0.1)
+    player.destroy_node()
+    with pytest.raises(bagio.BagError, match='not recorded'):
+        ReplayNode(context=context, parameter_overrides=params(bag=str(bag),
+                                                               topics=['/nope']))
+
+
+def _recorder_cmd(root, name, topic, *extra):
+    from ament_index_python.packages import get_package_prefix
+    exe = Path(get_package_prefix('irb_identification')) / 'lib' / 'irb_identification' / \
+        'recorder'
+    return [str(exe), '--ros-args', '-p', f'root:={root}', '-p', f'name:={name}',
+            '-p', f'topics:=[{topic}]', '-p', 'types:=[sensor_msgs/msg/JointState]',
+            '-r', f'__node:=rec_{uuid.uuid4().hex[:6]}', *extra]
+
+
+@pytest.mark.slow
+def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
+    """A recorder process killed with SIGKILL: the bag on disk is readable as it is, holds
+    everything published up to 2 s before the kill; recovery (on the next start) salvages
+    more, and the next start refuses to overwrite the bag."""
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topic = f'/js_kill_{tag}'
+    node = rclpy.create_node(f'killpub_{tag}', context=context)
+    pub = node.create_publisher(JointState, topic, 100)
+    executor.add_node(node)
+    proc = subprocess.Popen(_recorder_cmd(tmp_path, 'killed', topic),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 60), \
+            'recorder did not subscribe'
+        sent_at = []
+
+        def tick():
+            pub.publish(joint_state(len(sent_at)))
+            sent_at.append(time.monotonic())
+        node.create_timer(1 / 248, tick)
+        assert spin_until(executor, lambda: len(sent_at) and sent_at[-1] - sent_at[0] > 4.0,
+                          30)
+        proc.send_signal(signal.SIGKILL)
+        killed_at = time.monotonic()
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    bag = tmp_path / 'killed'
+    assert list(bag.glob('*.mcap.active')), 'expected an unfinished split'
+    counts = bag_check(bag)                        # readable as left on disk
+    ks = read_joint_series(bag, topic).position[:, 0].astype(int)
+    must_have = sum(1 for t in sent_at if t < killed_at - 2.0)
+    assert ks.max() + 1 >= must_have, (ks.max(), must_have, len(sent_at))
+    assert np.all(np.diff(ks) == 1) and ks[0] == 0
+    # next start: recovers the leftover, refuses to overwrite it
+    again = subprocess.run(_recorder_cmd(tmp_path, 'killed', topic), capture_output=True,
+                           text=True, timeout=60)
+    assert again.returncode == 1 and 'exists already' in again.stderr
+    assert 'recovered' in again.stderr + again.stdout
+    assert not list(bag.glob('*.mcap.active'))
+    after = bag_check(bag)
+    assert after[topic] >= counts[topic]
+    ks2 = read_joint_series(bag, topic).position[:, 0].astype(int)
+    assert np.all(np.diff(ks2) == 1)
+    node.destroy_node()
+
+
+def test_offline_experiment_bags_replayable(tmp_path, model, bag_check):
+    bags = run_experiments(model, model.friction, [2], [0.5], tmp_path, log=lambda s: None,
+                           config=SimConfig())
+    assert bag_check(bags[0])['/joint_states'] > 100
