@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES
-from .node_util import declare, state_qos
+from .node_util import declare, make_executor, state_qos
 
 
 class AxisBridge(Node):
@@ -43,6 +43,8 @@ class AxisBridge(Node):
                           'never send a command for a state older than this [s]')
         status_period = declare(self, 'status_period_s', 0.5,
                                 'period of /axis_bridge/status [s]')
+        self.executor_kind = declare(self, 'executor', 'events',
+                                     "'events' (rclpy EventsExecutor, faster) or 'single'")
         self.core = BridgeCore(link_timeout, max_age)
         self.joint_names = RobotModel.load().joint_names
         self.lock = threading.Lock()
@@ -150,11 +152,15 @@ class AxisBridge(Node):
 def main(args=None):
     rclpy.init(args=args)
     node = AxisBridge()
+    executor = make_executor(node.executor_kind)
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        while rclpy.ok():          # spin_once loop: EventsExecutor.spin() ignores SIGTERM
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
 

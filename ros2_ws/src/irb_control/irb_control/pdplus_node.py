@@ -13,14 +13,14 @@ from irb_description.model import RobotModel
 from irb_description.path import CirclePath
 from irb_interfaces.msg import ControllerState
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from .closed_loop import controller_friction
-from .node_util import declare, latched_qos, state_qos
+from .node_util import declare, latched_qos, make_executor, state_qos
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
                       ControllerConfig, PdPlusController, Watchdog)
 from .profiles import ProfileError, default_circle_profile, sine_trajectory
@@ -245,17 +245,6 @@ def _by_name(msg: JointState, names: list[str]):
                 np.array([msg.velocity[i] for i in idx], float))
     except (ValueError, IndexError):
         return np.full(3, np.nan), np.full(3, np.nan)
-
-
-def make_executor(kind: str, context=None):
-    """'events': rclpy's EventsExecutor (faster; drive it with spin_once), else single."""
-    if kind == 'events':
-        try:
-            from rclpy.experimental import EventsExecutor
-            return EventsExecutor(context=context)
-        except ImportError:
-            pass
-    return SingleThreadedExecutor(context=context)
 
 
 def main(args=None):
