@@ -185,7 +185,10 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
     c = np.array([p.speed for p in points])
     f_pos = np.array([p.f_pos for p in points])
     f_neg = np.array([p.f_neg for p in points])
-    par = fit_parametric(np.concatenate([c, -c]), np.concatenate([f_pos, f_neg]))
+    try:
+        par = fit_parametric(np.concatenate([c, -c]), np.concatenate([f_pos, f_neg]))
+    except IdentificationError as exc:      # a joint that cannot be fitted is reported, not fatal
+        return JointResult(name, points, warnings=warnings, error=f'{name}: {exc}')
     poly_pos = poly_neg = None
     order_pos = choose_order(c, f_pos, config.poly_order)
     order_neg = choose_order(-c, f_neg, config.poly_order)

@@ -88,3 +88,13 @@ def test_identify_synthetic_noisy(rng):
     assert r.friction.valid_range == (0.02, 2.0) or np.allclose(r.friction.valid_range,
                                                                  (0.02, 2.0), rtol=1e-3)
     assert len(r.friction.polynomial_positive) == 8
+
+
+
+def test_too_few_points_for_the_parametric_fit_is_a_joint_error_not_a_crash():
+    from irb_identification.friction_fit import FitConfig, identify_points
+    from irb_identification.segments import SpeedPoint
+    pts = [SpeedPoint(speed=c, tau_plus=12 + c, tau_minus=-8 - c, tau_f=10 + c, f_pos=10 + c,
+                      f_neg=-10 - c, sem=0.1, n_plus=1, n_minus=1) for c in (0.1, 0.5)]
+    r = identify_points('joint_1', pts, FitConfig(min_speeds=2))
+    assert r.friction is None and 'too few' in r.error
