@@ -1,5 +1,8 @@
 #!/usr/bin/env bash
-# Set up (idempotent) and run the main job on the built-in simulator.
+# Set up (idempotent) and run the main job on the built-in simulator:
+# model check, then the thesis pipeline (identification sweeps -> friction map -> energy-optimal
+# and trapezoidal circles with compensation -> circle without -> report under runs/<id>/).
+# Extra arguments go to thesis_run (e.g. --quick, --verbose).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$ROOT/scripts/setup.sh"
@@ -7,6 +10,6 @@ set +u
 source "$ROOT/scripts/env.sh"
 set -u
 export MPLBACKEND=Agg
-# Until the simulator, controller and planner exist (issues 3, 4, 8) the main job is the model
-# check: it verifies the model and prints what it computes for the thesis circle.
-exec ros2 run irb_description model_check "$@"
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+ros2 run irb_description model_check
+exec ros2 run irb_identification thesis_run "$@"

@@ -17,11 +17,14 @@ setup(
     zip_safe=True,
     maintainer='IRB stack maintainers',
     maintainer_email='maintainers@irb-stack.dev',
-    description='Energy-optimal motion planning along a path (CasADi) and its baselines for the IRB 1600.',
+    description=('Energy-optimal motion planning along a path (CasADi) and its baselines '
+                 'for the IRB 1600.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'planner = irb_planning.planner_node:main',
+            'plan = irb_planning.plan_cli:main',
         ],
     },
 )

@@ -11,18 +11,16 @@ import threading
 import time
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES
-from .node_util import declare, make_executor, state_qos
+from .node_util import declare, run_node, spin_with, state_qos
 
 
 class AxisBridge(Node):
@@ -150,19 +148,7 @@ class AxisBridge(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = AxisBridge()
-    executor = make_executor(node.executor_kind)
-    executor.add_node(node)
-    try:
-        while rclpy.ok():          # spin_once loop: EventsExecutor.spin() ignores SIGTERM
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(AxisBridge, lambda node: spin_with(node.executor_kind)(node), args)
 
 
 if __name__ == '__main__':

@@ -18,11 +18,10 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from irb_description.model import RobotModel
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from .fake_axis_core import FAULT_KINDS, FakeAxisCore, FaultConfig
-from .node_util import declare
+from .node_util import declare, run_node
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
 
 
@@ -139,15 +138,7 @@ class FakeAxisComputer(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = FakeAxisComputer()
-    try:
-        node.run()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(FakeAxisComputer, lambda node: node.run(), args)
 
 
 if __name__ == '__main__':

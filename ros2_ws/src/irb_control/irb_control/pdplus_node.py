@@ -8,19 +8,17 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import rclpy
 from irb_description.model import RobotModel
 from irb_description.path import CirclePath
 from irb_interfaces.msg import ControllerState
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from .closed_loop import controller_friction
-from .node_util import declare, latched_qos, make_executor, state_qos
+from .node_util import declare, latched_qos, run_node, spin_with, state_qos
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
                       ControllerConfig, PdPlusController, Watchdog)
 from .profiles import ProfileError, default_circle_profile, sine_trajectory
@@ -248,19 +246,7 @@ def _by_name(msg: JointState, names: list[str]):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = PdPlusNode()
-    executor = make_executor(node.P['executor'])
-    executor.add_node(node)
-    try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'])(node), args)
 
 
 if __name__ == '__main__':

@@ -22,6 +22,12 @@ brakes: applied torque 0, velocity 0, position held; the next command releases t
 Sensors: encoder-like joint measurement (quantisation + Gaussian noise) each period, and a
 camera that samples the TCP position every ``camera_period_s`` with ``camera_noise_m`` noise
 (per axis).
+
+Extra physical effects (``effects``, irb_control.plant_effects: Stribeck hump, Coulomb
+asymmetry, torque offset, nonlinear viscous, payload, rotor inertia, extra delay, cogging,
+backlash, elasticity, viscous drift) hook in at four places: the pinocchio model (payload,
+armature), the dry-friction level and an extra torque in each substep, the torque delay line,
+and the camera's link-side position. Without effects the plant is unchanged.
 """
 from __future__ import annotations
 
@@ -35,6 +41,8 @@ import pinocchio as pin
 import yaml
 from irb_description.friction import FrictionMap, friction_map_from_dict
 from irb_description.model import RobotModel
+
+from .plant_effects import EffectsRuntime, PlantEffects
 
 PERIOD_S = 0.004032
 
@@ -140,9 +148,15 @@ class Plant:
     """The simulated robot. ``model`` is used for dynamics and FK only (its own workspace)."""
 
     def __init__(self, model: RobotModel, friction: PlantFriction, config: PlantConfig
-                 = PlantConfig()):
+                 = PlantConfig(), effects: PlantEffects | None = None):
         self.model = model.copy()
         self._pm = self.model.model
+        self.effects = effects or PlantEffects()
+        self._fx = (EffectsRuntime(self.effects, friction.stribeck_velocity, config.period_s,
+                                   config.substeps) if self.effects else None)
+        if self._fx is not None:
+            self._fx.apply_to_model(self._pm)
+            self.model.data = self._pm.createData()
         self._pd = self.model.data
         self.friction = friction
         self.config = config
@@ -169,6 +183,10 @@ class Plant:
         self.applied = np.zeros(3)
         self.braked = True
         self.friction_torque = np.zeros(3)
+        self._tau_t = [0.0, 0.0, 0.0]
+        if self.effects:
+            self._fx = EffectsRuntime(self.effects, self.friction.stribeck_velocity,
+                                      self.config.period_s, self.config.substeps)
         self._next_camera_t = self.state.t
         self.camera.clear()
         self.steps = 0
@@ -234,9 +252,12 @@ class Plant:
             self.applied = applied
         t0 = s.t
         tau = self.applied.tolist()
-        for _ in range(c.substeps):
+        taus = [tau] * c.substeps
+        if self._fx is not None and self._fx.delay_substeps:
+            taus, self.applied = self._fx.delayed_torques(self.applied)
+        for j in range(c.substeps):
             q_prev = s.q
-            self._substep(tau)
+            self._substep(taus[j])
             self._camera(q_prev)
         s.t = t0 + c.period_s
         self.steps += 1
@@ -257,9 +278,15 @@ class Plant:
         vl = v.tolist()
         fv = self._fv
         r = [tau[i] - b[i] - fv[i] * vl[i] for i in range(3)]
+        fx = self._fx
+        if fx is not None and fx.has_torque:
+            x = fx.extra_torque(q.tolist(), vl, s.t)
+            r = [r[i] - x[i] for i in range(3)]
         vf = [vl[i] + W[i][0] * r[0] + W[i][1] * r[1] + W[i][2] * r[2] for i in range(3)]
         bound = [self._fc[i] + (self._fs[i] - self._fc[i])
                  * math.exp(-(vl[i] / self._vs[i]) ** 2) for i in range(3)]
+        if fx is not None and fx.stribeck is not None:
+            bound = fx.dry_level(vl, bound)
         lam = self._solve_dry_friction(W, vf, bound)
         vn = [vf[i] - W[i][0] * lam[0] - W[i][1] * lam[1] - W[i][2] * lam[2]
               for i in range(3)]
@@ -270,6 +297,10 @@ class Plant:
         s.qd = np.array(vn)
         self._lam = lam
         self._vprev = vl
+        if fx is not None and fx.link_side:
+            # torque through the gear: applied minus everything on the motor side
+            xt = x if fx.has_torque else [0.0, 0.0, 0.0]
+            self._tau_t = [tau[i] - lam[i] - fv[i] * vl[i] - xt[i] for i in range(3)]
         s.energy += h * (abs(tau[0] * vn[0]) + abs(tau[1] * vn[1]) + abs(tau[2] * vn[2]))
         s.t += h
 
@@ -334,12 +365,14 @@ class Plant:
         while self._next_camera_t <= t1 + 1e-12:
             w = (self._next_camera_t - t0) / self._h
             q = q_prev + min(max(w, 0.0), 1.0) * (s.q - q_prev)
+            if self._fx is not None and self._fx.link_side:
+                q = self._fx.link_position(q, self._tau_t)
             p = self.model.fk(q) + c.camera_noise_m * self.rng.standard_normal(3)
             self.camera.append((self._next_camera_t, p))
             self._next_camera_t += c.camera_period_s
 
     def tcp(self) -> np.ndarray:
-        """True TCP position (3,) [m]."""
+        """True TCP position (3,) [m] (motor-side joints; the camera sees the link side)."""
         return self.model.fk(self.state.q)
 
 

@@ -77,15 +77,25 @@ class ProcessGroup:
 
     def start(self) -> None:
         for spec in self.specs:
-            env = dict(os.environ, PYTHONUNBUFFERED='1', **spec.env)
-            proc = subprocess.Popen(list(spec.cmd), stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, text=True, env=env,
-                                    start_new_session=True)
-            self.procs[spec.name] = proc
-            t = threading.Thread(target=self._pump, args=(spec.name, proc.stdout), daemon=True)
-            t.start()
-            self._threads.append(t)
-            self.log(f'started {spec.name} (pid {proc.pid}): {" ".join(spec.cmd)}')
+            self._launch(spec)
+
+    def add(self, spec: ProcessSpec) -> None:
+        """Start one more process in the running group."""
+        if spec.name in self.procs:
+            raise ValueError(f'a process named {spec.name!r} already exists')
+        self.specs.append(spec)
+        self._launch(spec)
+
+    def _launch(self, spec: ProcessSpec) -> None:
+        env = dict(os.environ, PYTHONUNBUFFERED='1', **spec.env)
+        proc = subprocess.Popen(list(spec.cmd), stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, env=env,
+                                start_new_session=True)
+        self.procs[spec.name] = proc
+        t = threading.Thread(target=self._pump, args=(spec.name, proc.stdout), daemon=True)
+        t.start()
+        self._threads.append(t)
+        self.log(f'started {spec.name} (pid {proc.pid}): {" ".join(spec.cmd)}')
 
     def poll(self) -> str | None:
         """Name of a required process that has exited (recorded in ``failed``), else None."""
@@ -109,15 +119,30 @@ class ProcessGroup:
             time.sleep(period_s)
         return bool(condition())
 
+    def stop_one(self, name: str) -> int:
+        """Stop one process (SIGINT, SIGTERM, SIGKILL) and forget it; returns its exit code."""
+        self._stop([self.procs[name]])
+        self.specs = [s for s in self.specs if s.name != name]
+        return self.procs.pop(name).returncode
+
     def stop(self) -> dict[str, int]:
         """Stop every process (SIGINT, then SIGTERM, then SIGKILL); returns exit codes."""
+        self._stop(list(self.procs.values()))
+        for t in self._threads:
+            t.join(timeout=2.0)
+        return {name: p.returncode for name, p in self.procs.items()}
+
+    def _stop(self, procs: list) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [p for p in self.procs.values() if p.poll() is None]
+            alive = [p for p in procs if p.poll() is None]
             if not alive:
                 break
             for p in alive:
                 try:
-                    os.killpg(p.pid, sig)       # the whole session: ros2 run and its child
+                    if sig == signal.SIGINT:    # the leader only: `ros2 run` forwards it, and
+                        os.kill(p.pid, sig)     # a second SIGINT would break the node's cleanup
+                    else:
+                        os.killpg(p.pid, sig)   # the whole session: ros2 run and its child
                 except ProcessLookupError:
                     pass
             deadline = time.monotonic() + (self.stop_timeout_s if sig != signal.SIGKILL
@@ -129,6 +154,3 @@ class ProcessGroup:
                     pass
             if sig != signal.SIGINT and any(p.poll() is not None for p in alive):
                 self.log(f'needed {signal.Signals(sig).name} to stop some processes')
-        for t in self._threads:
-            t.join(timeout=2.0)
-        return {name: p.returncode for name, p in self.procs.items()}

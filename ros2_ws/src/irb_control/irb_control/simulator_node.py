@@ -15,14 +15,15 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from .node_util import declare, state_qos
+from .node_util import declare, run_node, state_qos
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
+from .plant_effects import load_plant_effects
 
 
 def _stamp(t: float) -> Time:
@@ -64,6 +65,9 @@ class SimulatorNode(Node):
             'seed': declare(self, 'seed', d.seed, 'noise seed'),
             'plant_friction_file': declare(self, 'plant_friction_file', '',
                                            "plant friction YAML; '' = config/plant.yaml"),
+            'plant_effects_file': declare(self, 'plant_effects_file', '',
+                                          "YAML with an 'effects:' section; '' = the plant "
+                                          'friction file (no section: no effects)'),
             'lockstep_wait_s': declare(self, 'lockstep_wait_s', 0.05,
                                        'lockstep: wall time to wait for a command [s]'),
             'stats_path': declare(self, 'stats_path', '',
@@ -84,7 +88,8 @@ class SimulatorNode(Node):
             velocity_noise_rad_s=p['velocity_noise_rad_s'],
             camera_period_s=p['camera_period_s'], camera_noise_m=p['camera_noise_m'],
             seed=p['seed'])
-        self.plant = Plant(model, friction, self.config)
+        effects = load_plant_effects(p['plant_effects_file'] or ffile)
+        self.plant = Plant(model, friction, self.config, effects)
         self.lockstep = p['mode'] == 'lockstep'
         self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
         self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
@@ -103,7 +108,8 @@ class SimulatorNode(Node):
         self.t_wall0 = time.monotonic()
         self.get_logger().info(
             f"simulator: {p['mode']}, T = {p['period_s']} s, {p['substeps']} substeps, delay "
-            f"{p['delay_samples']} samples, plant friction {ffile}")
+            f"{p['delay_samples']} samples, plant friction {ffile}, effects "
+            f"{effects.names() or 'none'}")
 
     # --- command -------------------------------------------------------------------------
     def on_command(self, msg: JointState) -> None:
@@ -216,21 +222,19 @@ def _effort_by_name(msg: JointState, names: list[str]) -> np.ndarray | None:
     return np.array(msg.effort[:len(names)], float)
 
 
-def main(args=None):
-    rclpy.init(args=args)
-    node = SimulatorNode()
+def _spin(node: SimulatorNode) -> None:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
         node.run(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
         if node.p['stats_path']:
             Path(node.p['stats_path']).write_text(json.dumps(node.stats(), indent=2))
         executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+
+
+def main(args=None):
+    run_node(SimulatorNode, _spin, args)
 
 
 if __name__ == '__main__':

@@ -66,3 +66,13 @@ def test_stubborn_process_is_killed():
         assert group.wait_until(lambda: 'ready' in out.getvalue(), timeout_s=30)
     assert group.procs['s'].returncode == -9
     assert any('SIGKILL' in m for m in logs)
+
+
+def test_add_and_stop_one_while_the_group_runs():
+    out = io.StringIO()
+    with ProcessGroup([ProcessSpec('a', SLEEPER)], lambda m: None, out) as group:
+        group.add(ProcessSpec('b', SLEEPER))
+        assert group.wait_until(lambda: '[b] ready' in out.getvalue(), timeout_s=30)
+        assert group.stop_one('b') == 0
+        assert 'b' not in group.procs and group.procs['a'].poll() is None
+        assert group.poll() is None

@@ -81,6 +81,10 @@ class RecorderNode(Node):
             if msgtype is None:
                 continue
             pubs = self.get_publishers_info_by_topic(topic)
+            if not pubs:
+                # only subscribers so far: wait for a publisher, whose QoS decides ours (a
+                # reliable guess would never match a best-effort publisher appearing later)
+                continue
             info = TopicInfo.for_type(topic, msgtype, [qos_to_dict(p.qos_profile)
                                                        for p in pubs])
             self.writer.add_topic(info)

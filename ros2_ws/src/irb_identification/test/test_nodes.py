@@ -270,3 +270,32 @@ def test_offline_experiment_bags_replayable(tmp_path, model, bag_check):
     bags = run_experiments(model, model.friction, [2], [0.5], tmp_path, log=lambda s: None,
                            config=SimConfig())
     assert bag_check(bags[0])['/joint_states'] > 100
+
+
+def test_topic_seen_first_through_a_subscriber_is_recorded_once_published(ctx, tmp_path,
+                                                                         bag_check):
+    """Only a subscriber exists when the recorder starts; the best-effort publisher comes
+    later. The recorder must wait for it and match its QoS (a reliable guess never would)."""
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topic = f'/late_{tag}'
+    be = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    other = rclpy.create_node(f'other_{tag}', context=context)
+    other.create_subscription(JointState, topic, lambda m: None, be)
+    rec = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='late', topics=[topic], discovery_period_s=0.1))
+    executor.add_node(other)
+    executor.add_node(rec)
+    assert spin_until(executor, lambda: rec.count_subscribers(topic) >= 1
+                      and len(other.get_subscriptions_info_by_topic(topic)) >= 1)
+    spin_until(executor, lambda: topic in rec.subs, timeout=1.0)   # give discovery a chance
+    assert topic not in rec.subs, 'subscribed before any publisher existed'
+    pub = other.create_publisher(JointState, topic, be)
+    assert spin_until(executor, lambda: pub.get_subscription_count() >= 2)
+    timer = other.create_timer(1 / 248, lambda: pub.publish(joint_state(0)))
+    assert spin_until(executor, lambda: rec.writer.counts.get(topic, 0) >= 20)
+    timer.cancel()
+    executor.remove_node(rec)
+    rec.destroy_node()
+    other.destroy_node()
+    bag_check(tmp_path / 'late')

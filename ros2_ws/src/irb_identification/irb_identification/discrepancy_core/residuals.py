@@ -1,0 +1,127 @@
+"""The nominal model on the measured motion: three residual channels. No rclpy.
+
+Per run (bag), with T the sample period:
+
+* **torque** (N, 3) [N m]: r = L(effort) - [M(q) qdd + C(q, qd) qd + g(q)] - tau_f(qd)
+  - tau_x(known effects), where L is a Savitzky-Golay smoother (order 3, ``window_s``),
+  q = L(q_enc) and qd, qdd are its central first and second differences, and the effort
+  (torque over [t - T, t)) is moved to t and smoothed with the same L, so both sides of the
+  robot equation see the same linear filter (M varies slowly). ``moving`` (N, 3)
+  marks samples whose joint slides (|qd| > ``v_min``, no zero crossing within half a window):
+  at rest dry friction is indeterminate and carries no information.
+* **tcp** (M, 3) [m]: r = camera - FK(q(t_cam)) with q interpolated to the camera instants
+  (cubic); the camera sees the link side, the encoders the motor side.
+* **command** (K, 3) [N m]: r = effort(t) - cmd(t - L T), L = ``command_lag_samples`` (the
+  nominal pipeline: 3 samples + the effort's own period = 4); braked samples are excluded.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_filter
+
+from .bagdata import RunData
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """window_s [s] SG window, sg_order, v_min [rad/s], command_lag_samples, period_s [s]."""
+
+    window_s: float = 0.1
+    sg_order: int = 3
+    v_min: float = 0.01
+    command_lag_samples: int = 4
+    period_s: float = 0.004032
+    edge_s: float = 0.1
+
+
+@dataclass
+class Channels:
+    """Prepared data of one run; arrays as in the module docstring plus what the library
+    needs: t (N,), q, qd, qdd (N, 3), tau_rigid (N, 3) = M qdd + C qd + g, t_global (N,)
+    [s since the first sample of all runs]; cam_*: camera channel; cmd_*: command channel."""
+
+    name: str
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    effort: np.ndarray
+    tau_rigid: np.ndarray
+    tau_f: np.ndarray
+    r_tau: np.ndarray
+    moving: np.ndarray
+    cam_t: np.ndarray
+    cam_q: np.ndarray
+    cam_tau: np.ndarray
+    r_tcp: np.ndarray
+    cmd_t: np.ndarray
+    cmd: np.ndarray
+    eff_t: np.ndarray
+    eff: np.ndarray
+    r_cmd: np.ndarray
+    t0_global: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def _odd_window(window_s: float, period_s: float, n: int, order: int) -> int:
+    w = int(round(window_s / period_s)) | 1
+    return max(order + 2 | 1, min(w, (n - 1) | 1 if n % 2 == 0 else n))
+
+
+def prepare_run(run: RunData, model, friction, config: ResidualConfig = ResidualConfig(),
+                t_origin: float = 0.0) -> Channels:
+    """Channels of one run for the nominal ``model`` (RobotModel) and ``friction`` map."""
+    c = config
+    T = float(np.median(np.diff(run.t))) if len(run.t) > 1 else c.period_s
+    n = len(run.t)
+    w = _odd_window(c.window_s, T, n, c.sg_order)
+    # One linear filter L (SG smoothing) on both sides of M qdd + n = tau: the derivatives
+    # are central differences of L(q) = L(differences of q); the second difference of the
+    # samples matches the mean torque over [t_{k-1}, t_{k+1}) = (e_k + e_{k+1}) / 2.
+    q = savgol_filter(run.q, w, c.sg_order, axis=0)
+    qd = np.gradient(q, T, axis=0)
+    qdd = np.zeros_like(q)
+    qdd[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) / T**2
+    qdd[0], qdd[-1] = qdd[1], qdd[-2]
+    e_mid = run.effort.copy()
+    e_mid[:-1] = 0.5 * (run.effort[:-1] + run.effort[1:])   # torque around t_k
+    effort = savgol_filter(e_mid, w, c.sg_order, axis=0)
+    tau_rigid = np.array([model.inverse_dynamics(a, b, d) for a, b, d in zip(q, qd, qdd)])
+    tau_f = friction.torque(qd)
+    r_tau = effort - tau_rigid - tau_f
+    # moving: sliding and no sign change within half a window
+    half = w // 2
+    slide = np.abs(qd) > c.v_min
+    bad = ~slide
+    k = np.ones(2 * half + 1)
+    near_stop = np.stack([np.convolve(bad[:, j].astype(float), k, 'same') > 0
+                          for j in range(3)], axis=1)
+    edge = (run.t - run.t[0] < c.edge_s) | (run.t[-1] - run.t < c.edge_s)
+    moving = slide & ~near_stop & ~edge[:, None]
+    # camera channel
+    inside = (run.cam_t >= run.t[0] + c.edge_s) & (run.cam_t <= run.t[-1] - c.edge_s)
+    cam_t = run.cam_t[inside]
+    if len(cam_t) and n > 3:
+        cam_q = CubicSpline(run.t, q, axis=0)(cam_t)
+        cam_tau = np.stack([np.interp(cam_t, run.t, tau_rigid[:, j]) for j in range(3)], 1)
+        fk = np.array([model.fk(x) for x in cam_q])
+        r_tcp = run.cam_p[inside] - fk
+    else:
+        cam_q = cam_tau = r_tcp = np.empty((0, 3))
+    # command channel: effort(t) against cmd(t - L T)
+    if len(run.cmd_t) > 1:
+        lagged = run.t - c.command_lag_samples * T
+        ok = ((lagged >= run.cmd_t[0]) & (lagged <= run.cmd_t[-1])
+              & np.any(run.effort != 0.0, axis=1))
+        eff_t, eff = run.t[ok], run.effort[ok]
+        pred = np.stack([np.interp(eff_t - c.command_lag_samples * T, run.cmd_t,
+                                   run.cmd[:, j]) for j in range(3)], axis=1)
+        r_cmd = eff - pred
+    else:
+        eff_t, eff, r_cmd = np.empty(0), np.empty((0, 3)), np.empty((0, 3))
+    return Channels(run.name, run.t, q, qd, qdd, effort, tau_rigid, tau_f, r_tau, moving,
+                    cam_t, cam_q, cam_tau, r_tcp, run.cmd_t, run.cmd, eff_t, eff, r_cmd,
+                    t_origin, {'period_s': T, 'window': w})

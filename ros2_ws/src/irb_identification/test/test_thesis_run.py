@@ -1,0 +1,55 @@
+"""The main job end to end (shortened): node graph, sweeps, identify, plans, runs, report."""
+import json
+import os
+import subprocess
+
+import pytest
+
+from irb_identification.run_report import circle_error, saving_percent
+from irb_identification.thesis_run import new_run_id
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def test_run_ids_never_collide(tmp_path):
+    first = new_run_id(tmp_path)
+    (tmp_path / first).mkdir()
+    second = new_run_id(tmp_path)
+    assert second != first and second.startswith(first)
+
+
+def test_circle_error_and_saving():
+    import numpy as np
+    c = np.array([0.6, 0.0, 0.13])
+    p = np.array([[0.75, 0.0, 0.13], [0.6, 0.152, 0.13], [0.45, 0.0, 0.129]])
+    np.testing.assert_allclose(circle_error(p, c, 0.15), [0.0, 0.002, 0.001], atol=1e-12)
+    assert saving_percent(93.0, 100.0) == pytest.approx(7.0)
+
+
+def test_quick_pipeline_end_to_end(tmp_path):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    res = subprocess.run(['ros2', 'run', 'irb_identification', 'thesis_run', '--quick',
+                          '--root', str(tmp_path)], capture_output=True, text=True,
+                         timeout=900, env=env)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    runs = list((tmp_path / 'runs').iterdir())
+    assert len(runs) == 1
+    out = runs[0]
+    report = (out / 'report.md').read_text()
+    for heading in ('## Energy', '## Path accuracy', '## Identified friction', '## Planner',
+                    '## Bags'):
+        assert heading in report
+    for png in ('plots/power.png', 'plots/path_error.png', 'plots/torques_speeds.png',
+                'plots/plan.png'):
+        assert (out / png).stat().st_size > 10_000, png
+    s = json.loads((out / 'summary.json').read_text())
+    for run in ('energy_ff', 'trapezoid_ff', 'energy_noff'):
+        assert s[run]['energy_j'] > 0
+        assert (tmp_path / 'bags' / f'{out.name}_{run}' / 'metadata.yaml').is_file()
+        # each run is one lap of the planned duration (no second lap, no stall)
+        assert s[run]['duration_s'] == pytest.approx(6.0, abs=0.5), (run, s[run])
+    # friction compensation must cut the camera path error clearly (thesis: 25-50 %)
+    assert s['path_error_reduction_percent'] > 25
+    # equal duration, and the optimum is not worse than the baseline beyond tracking noise
+    assert s['energy_saving_percent'] > -2
+    assert (out / 'friction_map.yaml').is_file()

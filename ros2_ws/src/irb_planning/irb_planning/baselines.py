@@ -1,0 +1,189 @@
+"""Baselines: trapezoidal TCP-speed profile and the convex lower bound on the energy (no ROS).
+
+The time-optimal profile is ``transcription.Transcription`` with the objective T (energy
+weight ~0): same grid, same exact friction, same limits, so "shorter than the time-optimal
+duration" means exactly "infeasible for the energy problem".
+
+Convex lower bound
+------------------
+Split the power per unit theta of joint i into y = x + d: x = (m a + c b + g)_i Phi'_i is affine
+in (a, b) and d = tau_f,i Phi'_i >= 0 is the friction dissipation (a passive friction map;
+parametric Coulomb F_c, breakaway F_s >= F_c, viscous F_v). With v = Phi' sqrt(b):
+
+    d = (F_c + (F_s - F_c) exp(-Phi'^2 b / v_s^2)) |Phi'| + F_v Phi'^2 sqrt(b)
+    d <= F_s |Phi'| + F_v Phi'^2 sqrt(b)
+
+Introduce s <= sqrt(b) (s^2 <= b, convex). Then |y| = max(y, -y) >= l with
+
+    l = max( x + F_c |Phi'| + (F_s - F_c) exp(-Phi'^2 b / v_s^2) |Phi'| + F_v Phi'^2 s ,
+             -x - F_s |Phi'| - F_v Phi'^2 sqrt(b) )
+
+which is convex in (b, s) (exp(-k b) convex, sqrt(b) concave). The duration T = sum 2 dth /
+(sqrt b_k + sqrt b_{k+1}) is relaxed to sum 2 dth / (s_k + s_{k+1}) <= T_req (convex, >= the
+true T), the torque limits to what the friction interval above implies (affine, or concave >=
+const), the speed limits and theta_dot >= delta are kept. Every feasible point of the
+transcription (with s = sqrt b) is feasible here with objective <= its energy, so the global
+optimum of this convex problem (IPOPT finds it: convex objective and constraints) is a lower
+bound on the energy of any profile on this grid and quadrature. It is tight when the
+dissipation bounds are tight: few braking phases (x + d < 0, where F_s replaces the real
+Coulomb + Stribeck friction) and s = sqrt(b), which the duration constraint enforces wherever
+time is scarce. It ignores the tanh smoothing of the optimiser's friction and holds for the
+parametric map only (not for polynomial maps).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
+from .profile import ThetaProfile
+from .transcription import BOUNDARY_REST, SolveRequest
+
+
+def trapezoid_profile(duration: float, ramp_fraction: float = 0.1, n: int = 401
+                      ) -> ThetaProfile:
+    """Trapezoidal TCP speed along the path, rest to rest, in ``duration`` T [s].
+
+    Constant acceleration for ramp_fraction * T, cruise, constant deceleration for the same
+    time (what a robot's own path planner does). On a circle TCP speed = r theta_dot, so theta
+    has the same profile: cruise theta_dot_c = 2 pi / (T (1 - ramp_fraction)). During a ramp
+    b = theta_dot^2 is linear in theta, so the profile is exact on the nodes (``n`` uniform
+    nodes plus the two ramp ends).
+    """
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ValueError(f'duration must be > 0, got {duration!r}')
+    if not 0 < ramp_fraction <= 0.5:
+        raise ValueError(f'ramp_fraction must be in (0, 0.5], got {ramp_fraction!r}')
+    t_r = ramp_fraction * duration
+    v_c = 2 * np.pi / (duration - t_r)
+    th_r = 0.5 * v_c * t_r
+    theta = np.union1d(np.linspace(0.0, 2 * np.pi, n), [th_r, 2 * np.pi - th_r])
+    b = v_c ** 2 * np.minimum(1.0, np.minimum(theta, 2 * np.pi - theta) / th_r)
+    return ThetaProfile(theta, np.sqrt(np.maximum(b, 0.0)))
+
+
+@dataclass(frozen=True)
+class BoundResult:
+    """Lower bound [J] on the energy at duration [s]; profile of the relaxation; stats."""
+
+    energy: float
+    duration: float
+    profile: ThetaProfile | None
+    stats: SolveStats
+
+
+class EnergyBound:
+    """The convex relaxation above on the transcription's grid (Simpson, same points)."""
+
+    def __init__(self, nodes: PathDynamics, mids: PathDynamics, friction_map,
+                 boundary: str = BOUNDARY_REST, max_iter: int = 1000, tol: float = 1e-9):
+        t0 = time.perf_counter()
+        if any(j.polynomial_positive is not None for j in friction_map.joints):
+            raise ValueError('the convex bound needs a parametric friction map')
+        self.nodes, self.mids, self.boundary = nodes, mids, boundary
+        N = nodes.theta.size
+        n = nodes.dq.shape[1]
+        K = N - 1
+        self.N, self.n = N, n
+        dth = np.diff(nodes.theta)
+        Fc = np.array([j.coulomb for j in friction_map.joints])
+        Fs = np.array([j.static for j in friction_map.joints])
+        Fv = np.array([j.viscous for j in friction_map.joints])
+        vs = np.array([j.stribeck_velocity for j in friction_map.joints])
+
+        # --- decision variables: b (as in the transcription), s <= sqrt(b), epigraph e ---
+        if boundary == BOUNDARY_REST:
+            xb, xs = ca.SX.sym('b', N - 2), ca.SX.sym('s', N - 2)
+            b, s = ca.vertcat(0, xb, 0), ca.vertcat(0, xs, 0)
+        else:
+            xb, xs = ca.SX.sym('b', N - 1), ca.SX.sym('s', N - 1)
+            b, s = ca.vertcat(xb, xb[0]), ca.vertcat(xs, xs[0])
+        e = ca.SX.sym('e', 3 * n * K)
+        x = ca.vertcat(xb, xs, e)
+        self._nb = xb.numel()
+
+        # --- dynamics at interval start, midpoint, end (columns = points) ---------------
+        a = (b[1:] - b[:-1]) / (2 * ca.DM(dth))
+        rep = lambda row: ca.repmat(ca.reshape(row, 1, -1), n, 1)  # noqa: E731
+        pts = [  # (PathDynamics columns, b at the point, s at the point)
+            (nodes, slice(0, K), b[:-1], s[:-1]),
+            (mids, slice(0, K), 0.5 * (b[:-1] + b[1:]), 0.5 * (s[:-1] + s[1:])),
+            (nodes, slice(1, N), b[1:], s[1:])]
+        lower_rows, upper_rows, dis_rows, tau_lo_rows, tau_hi_rows = [], [], [], [], []
+        for dyn, sl, bp, sp in pts:
+            dq = dyn.dq[sl].T                                        # (n, K)
+            rigid = (ca.DM(dyn.m[sl].T) * rep(a) + ca.DM(dyn.c[sl].T) * rep(bp)
+                     + ca.DM(dyn.g[sl].T))
+            xr = rigid * ca.DM(dq)
+            absdq, dq2 = np.abs(dq), dq ** 2
+            sq = rep(ca.sqrt(bp))
+            S = rep(sp)
+            stribeck = ca.DM((Fs - Fc)[:, None] * absdq) * ca.exp(
+                -ca.DM(dq2 / vs[:, None] ** 2) * rep(bp))             # convex in b
+            d_lo = ca.DM(Fc[:, None] * absdq) + ca.DM(Fv[:, None] * dq2) * S + stribeck
+            d_hi = ca.DM(Fs[:, None] * absdq) + ca.DM(Fv[:, None] * dq2) * sq
+            lower_rows.append(ca.vec(xr + d_lo))      # e >= x + d_lo
+            upper_rows.append(ca.vec(xr + d_hi))      # e >= -(x + d_hi)
+            pos, neg = (dq > 0).astype(float), (dq < 0).astype(float)
+            zero = 1.0 - pos - neg
+            fv_dq = ca.DM(Fv[:, None] * dq)
+            f_lo = (ca.DM(pos * Fc[:, None]) + ca.DM(pos) * fv_dq * S
+                    + ca.DM(-neg * Fs[:, None]) + ca.DM(neg) * fv_dq * sq
+                    - ca.DM(zero * Fs[:, None]))
+            f_hi = (ca.DM(pos * Fs[:, None]) + ca.DM(pos) * fv_dq * sq
+                    + ca.DM(-neg * Fc[:, None]) + ca.DM(neg) * fv_dq * S
+                    + ca.DM(zero * Fs[:, None]))
+            tau_lo_rows.append(ca.vec(rigid + f_lo))  # <= tau_max
+            tau_hi_rows.append(ca.vec(rigid + f_hi))  # >= -tau_max
+        E_lo, E_hi = ca.vertcat(*lower_rows), ca.vertcat(*upper_rows)
+        w = ca.vec(ca.DM(np.tile(dth, (n, 1)))) / 6
+        W = ca.vertcat(w, 4 * w, w)
+
+        # --- objective: Simpson sum of the epigraph ---------------------------------------
+        f = ca.dot(W, e)
+        duration = ca.sum1(2 * ca.DM(dth) / (s[:-1] + s[1:]))
+
+        # --- path constraints ------------------------------------------------------------
+        b_mid = 0.5 * (b[1:] + b[:-1])
+        g_rows = [duration, b_mid, xs ** 2 - xb, e - E_lo, e + E_hi,
+                  ca.vertcat(*tau_lo_rows), ca.vertcat(*tau_hi_rows)]
+        self._sizes = [r.numel() for r in g_rows]
+        self._solver = ca.nlpsol('bound', 'ipopt', {'x': x, 'f': f, 'g': ca.vertcat(*g_rows)},
+                                 ipopt_options(max_iter, tol))
+        self._ne = e.numel()
+        self._dur = ca.Function('dur', [x], [duration])
+        self._bfun = ca.Function('b', [x], [b])
+        self.build_time = time.perf_counter() - t0
+
+    def solve(self, req: SolveRequest) -> BoundResult:
+        """Lower bound for the fixed duration req.duration (> 0) and the request's limits."""
+        nb, n, K = self._nb, self.n, self.N - 1
+        beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
+        beta_m = speed_bound(self.mids.dq, req.velocity_limit)
+        ubb = beta_n[1:-1] if self.boundary == BOUNDARY_REST else beta_n[:-1]
+        lo = req.min_theta_dot ** 2
+        lbx = np.concatenate([np.full(nb, lo), np.zeros(nb), np.zeros(self._ne)])
+        ubx = np.concatenate([ubb, np.sqrt(ubb), np.full(self._ne, np.inf)])
+        tau = np.tile(np.asarray(req.torque_limit, float), 3 * K)
+        inf = np.full(3 * n * K, np.inf)
+        lbg = np.concatenate([[0.0], np.zeros(K), np.full(nb, -np.inf), np.zeros(3 * n * K),
+                              np.zeros(3 * n * K), -inf, -tau])
+        ubg = np.concatenate([[req.duration], beta_m, np.zeros(nb), inf, inf, tau, inf])
+        b0 = np.clip((2 * np.pi / req.duration) ** 2, lo, 0.95 * ubb)
+        x0 = np.concatenate([b0, np.sqrt(b0), np.full(self._ne, 1.0)])
+        t0 = time.perf_counter()
+        sol = self._solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        st = self._solver.stats()
+        elapsed = time.perf_counter() - t0
+        x = np.asarray(sol['x']).ravel()
+        b = np.maximum(np.asarray(self._bfun(x)).ravel(), 0.0)
+        try:
+            profile = ThetaProfile(self.nodes.theta, np.sqrt(b))
+        except ValueError:
+            profile = None
+        stats = SolveStats(str(st['return_status']), bool(st['success']),
+                           int(st['iter_count']), elapsed)
+        return BoundResult(float(sol['f']), float(self._dur(x)), profile, stats)

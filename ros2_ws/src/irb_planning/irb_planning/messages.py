@@ -1,0 +1,105 @@
+"""Conversions between PlanPath messages and the planning core's dataclasses.
+
+``/planned_theta_profile`` (std_msgs/Float64MultiArray): a 4 x N row-major matrix, layout
+dim[0] = 'rows: t_s, theta_rad, theta_dot_rad_s, theta_ddot_rad_s2' (size 4, stride 4 N),
+dim[1] = 'nodes' (size N, stride N); b = theta_dot^2 is linear in theta between nodes
+(theta_ddot constant per interval; the row holds node values = mean of the neighbours).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Point
+from irb_interfaces.msg import PathSpec
+from irb_interfaces.srv import PlanPath
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from .planner import PlanResult
+from .request import PlanRequest
+
+PROFILE_ROWS = 'rows: t_s, theta_rad, theta_dot_rad_s, theta_ddot_rad_s2'
+
+
+def request_from_msg(msg: PlanPath.Request) -> PlanRequest:
+    """PlanPath.Request -> PlanRequest (no validation here; the planner validates)."""
+    p = msg.path
+    return PlanRequest(
+        center=np.array([p.center.x, p.center.y, p.center.z], float), radius=p.radius,
+        start_angle=p.start_angle, direction=int(p.direction), objective=msg.objective,
+        duration=msg.duration, time_weight=msg.time_weight,
+        fourier_order=int(msg.fourier_order), grid_size=int(msg.grid_size),
+        limit_scaling=msg.limit_scaling, friction_map=msg.friction_map,
+        boundary=msg.boundary, path_type=p.type or PathSpec.TYPE_CIRCLE)
+
+
+def path_msg(req: PlanRequest) -> PathSpec:
+    """The request's circle as a PathSpec."""
+    c = np.asarray(req.center, float)
+    return PathSpec(type=req.path_type, center=Point(x=c[0], y=c[1], z=c[2]),
+                    radius=float(req.radius), start_angle=float(req.start_angle),
+                    direction=int(req.direction))
+
+
+def _duration(t: float) -> Duration:
+    sec = int(math.floor(t))
+    return Duration(sec=sec, nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+
+
+def trajectory_msg(result: PlanResult, nodes: dict) -> JointTrajectory:
+    """JointTrajectory at the profile's nodes: positions, velocities, accelerations, effort."""
+    traj = JointTrajectory(joint_names=list(result.joint_names))
+    for k, t in enumerate(nodes['t']):
+        traj.points.append(JointTrajectoryPoint(
+            positions=nodes['q'][k].tolist(), velocities=nodes['qd'][k].tolist(),
+            accelerations=nodes['qdd'][k].tolist(), effort=nodes['tau'][k].tolist(),
+            time_from_start=_duration(float(t))))
+    return traj
+
+
+def theta_profile_msg(result: PlanResult) -> Float64MultiArray:
+    """The theta profile as a 4 x N Float64MultiArray (layout in the module docstring)."""
+    pr = result.profile
+    data = np.vstack([pr.times, pr.theta, pr.theta_dot, pr.theta_ddot_nodes])
+    n = pr.theta.size
+    msg = Float64MultiArray(data=data.ravel().tolist())
+    msg.layout.dim = [MultiArrayDimension(label=PROFILE_ROWS, size=4, stride=4 * n),
+                      MultiArrayDimension(label='nodes', size=n, stride=n)]
+    return msg
+
+
+def fill_response(resp: PlanPath.Response, result: PlanResult, nodes: dict
+                  ) -> PlanPath.Response:
+    """Copy a successful plan into the service response."""
+    ev, base = result.evaluation, result.baseline
+    resp.success = True
+    resp.error_code = PlanPath.Response.ERROR_NONE
+    resp.message = '; '.join([f'{result.objective} plan, {ev.duration:.3f} s, '
+                              f'{ev.energy:.2f} J'] + result.notes)
+    resp.trajectory = trajectory_msg(result, nodes)
+    resp.theta = result.profile.theta.tolist()
+    resp.theta_dot = result.profile.theta_dot.tolist()
+    resp.theta_ddot = result.profile.theta_ddot_nodes.tolist()
+    resp.energy = ev.energy
+    resp.optimizer_energy = float(result.optimizer_energy)
+    resp.min_duration = float(result.min_duration)
+    resp.duration = ev.duration
+    resp.peak_torque = ev.peak_torque.tolist()
+    resp.solve_time = float(result.solve_time)
+    resp.iterations = int(result.iterations)
+    resp.solver_status = result.status
+    if base is not None:
+        resp.baseline_energy = base.energy
+        resp.baseline_duration = base.duration
+        resp.baseline_peak_torque = base.peak_torque.tolist()
+        resp.baseline_feasible = base.ok
+    return resp
+
+
+def profile_from_msg(msg: Float64MultiArray) -> dict:
+    """Inverse of theta_profile_msg: {'t', 'theta', 'theta_dot', 'theta_ddot'} arrays (N,)."""
+    n = msg.layout.dim[1].size
+    data = np.asarray(msg.data, float).reshape(4, n)
+    return dict(zip(('t', 'theta', 'theta_dot', 'theta_ddot'), data))

@@ -1,0 +1,117 @@
+"""`ros2 run irb_planning plan`: call the plan_path service, print a summary, write a plot.
+
+    ros2 run irb_planning plan --duration 10 [--objective energy] [--plot plan.png]
+
+Exit code 0 on success, 1 if the planner refused (its error code and message are printed),
+2 if the service did not answer.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Point
+from irb_interfaces.msg import PathSpec
+from irb_interfaces.srv import PlanPath
+from rclpy.executors import SingleThreadedExecutor
+
+from .plot import plot_plan
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(prog='plan', description=__doc__.splitlines()[0])
+    p.add_argument('--center', type=float, nargs=3, default=[0.6, 0.0, 0.13],
+                   metavar=('X', 'Y', 'Z'), help='circle centre [m] (thesis 0.6 0 0.13)')
+    p.add_argument('--radius', type=float, default=0.15, help='[m]')
+    p.add_argument('--start-angle', type=float, default=0.0, help='[rad]')
+    p.add_argument('--direction', type=int, default=1, choices=(1, -1))
+    p.add_argument('--objective', default='energy',
+                   help='energy | time | trapezoid | fourier')
+    p.add_argument('--duration', type=float, default=10.0, help='[s], 0 = free')
+    p.add_argument('--time-weight', type=float, default=0.0, help='[J/s] when duration 0')
+    p.add_argument('--order', type=int, default=7, help='Fourier order 3, 5, 7')
+    p.add_argument('--grid', type=int, default=0, help='theta nodes, 0 = planner default')
+    p.add_argument('--limit-scaling', type=float, default=0.0, help='(0, 1], 0 = 1')
+    p.add_argument('--friction-map', default='', help="friction-map YAML, '' = nominal")
+    p.add_argument('--boundary', default='', help="'' = rest, or periodic")
+    p.add_argument('--service', default='plan_path')
+    p.add_argument('--timeout', type=float, default=120.0, help='[s]')
+    p.add_argument('--plot', default='plan.png', help="PNG path, '' = no plot")
+    return p.parse_args(argv)
+
+
+def build_request(a) -> PlanPath.Request:
+    req = PlanPath.Request()
+    req.path = PathSpec(type=PathSpec.TYPE_CIRCLE, center=Point(x=a.center[0], y=a.center[1],
+                                                                z=a.center[2]),
+                        radius=a.radius, start_angle=a.start_angle, direction=a.direction)
+    req.objective, req.duration, req.time_weight = a.objective, a.duration, a.time_weight
+    req.fourier_order = a.order if a.objective == 'fourier' else 0
+    req.grid_size, req.limit_scaling = a.grid, a.limit_scaling
+    req.friction_map, req.boundary = a.friction_map, a.boundary
+    return req
+
+
+def summary(resp: PlanPath.Response) -> str:
+    rows = [('', 'plan', 'trapezoid'),
+            ('duration [s]', f'{resp.duration:.3f}', f'{resp.baseline_duration:.3f}'),
+            ('energy [J]', f'{resp.energy:.2f}', f'{resp.baseline_energy:.2f}'),
+            ('peak torque [N m]', ' '.join(f'{x:.1f}' for x in resp.peak_torque),
+             ' '.join(f'{x:.1f}' for x in resp.baseline_peak_torque)),
+            ('feasible', 'yes', 'yes' if resp.baseline_feasible else 'NO')]
+    saving = 100 * (1 - resp.energy / resp.baseline_energy) if resp.baseline_energy else 0
+    lines = [f'{r[0]:<20}{r[1]:>22}{r[2]:>22}' for r in rows]
+    lines += [f'saving vs trapezoid: {saving:.2f} %',
+              f'optimiser energy {resp.optimizer_energy:.2f} J, time-optimal duration '
+              f'{resp.min_duration:.3f} s, solver {resp.solver_status}, '
+              f'{resp.iterations} iterations, {1000 * resp.solve_time:.0f} ms',
+              resp.message]
+    return '\n'.join(lines)
+
+
+def main(args=None):
+    argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
+    a = parse_args(argv)
+    rclpy.init(args=args)
+    node = rclpy.create_node('plan_cli')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    code = 0
+    try:
+        client = node.create_client(PlanPath, a.service)
+        if not client.wait_for_service(timeout_sec=min(a.timeout, 30.0)):
+            print(f'service {a.service} not available', file=sys.stderr)
+            return 2
+        future = client.call_async(build_request(a))
+        executor.spin_until_future_complete(future, timeout_sec=a.timeout)
+        if not future.done():
+            print(f'no answer within {a.timeout} s', file=sys.stderr)
+            return 2
+        resp = future.result()
+        if not resp.success:
+            print(f'planner refused (error {resp.error_code}): {resp.message}')
+            return 1
+        print(summary(resp))
+        if a.plot:
+            pts = resp.trajectory.points
+            t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
+                          for p in pts])
+            qd = np.array([p.velocities for p in pts])
+            tau = np.array([p.effort for p in pts])
+            out = plot_plan(a.plot, np.array(resp.theta), np.array(resp.theta_dot), t, qd,
+                            tau, f'{a.objective}: {resp.duration:.2f} s, {resp.energy:.1f} J '
+                            f'(trapezoid {resp.baseline_energy:.1f} J)')
+            print(f'plot: {out}')
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

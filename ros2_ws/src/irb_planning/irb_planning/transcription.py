@@ -1,0 +1,270 @@
+"""Direct transcription on a theta-grid in b = theta_dot^2 (Verscheure et al. 2009), IPOPT.
+
+Grid: N nodes theta_0 = 0 < ... < theta_{N-1} = 2 pi, N-1 intervals. b_k at the nodes is the
+decision variable; on interval k, b is linear, so theta_ddot = a_k = (b_{k+1} - b_k) / (2 dth_k)
+is constant (b' = 2 a), and the exact time on it is 2 dth_k / (sqrt(b_k) + sqrt(b_{k+1})).
+
+    minimise     w_E E + w_T T
+    E = sum_k dth_k sum_i |y_ik|,  y_ik = tau_i(mid_k) Phi'_i(mid_k)        [J]
+    T = sum_k 2 dth_k / (sqrt b_k + sqrt b_{k+1})                         [s]
+    tau(theta) = m a + c b + g + tau_f(Phi' sqrt b)      (problem.PathDynamics)
+    s.t.  T = T_req (fixed duration) or T free (time-energy trade-off, w_T = time weight)
+          delta^2 <= b_k <= beta_k  (theta_dot >= delta; joint speeds, also at midpoints)
+          |tau| <= tau_max at both ends of every interval (with that interval's a_k)
+          boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}
+
+|y| is exact: epigraph variables e_ik >= +-y_ik with sum e minimised (no bias at the
+optimum), or, if ``abs_smoothing`` eps > 0, sqrt(y^2 + eps^2), whose bias is at most
+2 pi n eps [J]. The energy reported is always recomputed with the exact |y|.
+
+The NLP is built once per (path, grid, boundary, friction); duration, weights, delta and the
+limits are parameters or bounds, so a new request only re-solves (warm-started from the last
+solution). No ROS imports.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import casadi as ca
+import numpy as np
+
+from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
+from .profile import ThetaProfile
+
+BOUNDARY_REST = 'rest'
+BOUNDARY_PERIODIC = 'periodic'
+BOUNDARIES = (BOUNDARY_REST, BOUNDARY_PERIODIC)
+
+#: weight of the energy in a minimum-time solve (keeps the epigraph variables determined)
+TIME_OBJECTIVE_ENERGY_WEIGHT = 1e-5
+
+
+@dataclass(frozen=True)
+class SolveRequest:
+    """What changes between solves of one built problem.
+
+    duration T_req [s] (0 = free); time_weight w_T [J/s]; energy_weight w_E [-] (1 for
+    energy, ~0 for minimum time); min_theta_dot delta [rad/s]; velocity_limit and
+    torque_limit (n,) [rad/s], [N m] (already scaled / with margin).
+    """
+
+    duration: float
+    time_weight: float
+    energy_weight: float
+    min_theta_dot: float
+    velocity_limit: np.ndarray
+    torque_limit: np.ndarray
+
+
+@dataclass(frozen=True)
+class TranscriptionResult:
+    """profile; energy [J] and duration [s] of the optimiser's own quadrature (exact |y|);
+    peak torque (n,) [N m] at the nodes; stats."""
+
+    profile: ThetaProfile
+    energy: float
+    duration: float
+    peak_torque: np.ndarray
+    stats: SolveStats
+
+
+class Transcription:
+    """The (a, b) NLP on one path and grid; ``solve`` is thread safe (one solve at a time)."""
+
+    def __init__(self, nodes: PathDynamics, mids: PathDynamics, friction: Callable,
+                 boundary: str = BOUNDARY_REST, abs_smoothing: float = 0.0,
+                 max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True):
+        if boundary not in BOUNDARIES:
+            raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
+        self.nodes, self.mids, self.boundary = nodes, mids, boundary
+        self.abs_smoothing = float(abs_smoothing)
+        self._lock = threading.Lock()
+        self._last = None
+        self.use_warm_start = warm_start
+        t0 = time.perf_counter()
+        N = nodes.theta.size
+        n = nodes.dq.shape[1]
+        K = N - 1
+        dth = np.diff(nodes.theta)
+        self.N, self.n = N, n
+
+        # --- decision variables ----------------------------------------------------------
+        if boundary == BOUNDARY_REST:
+            xb = ca.SX.sym('b', N - 2)
+            b = ca.vertcat(0, xb, 0)                 # at rest at both ends
+        else:
+            xb = ca.SX.sym('b', N - 1)
+            b = ca.vertcat(xb, xb[0])                # b_{N-1} = b_0
+        use_epi = self.abs_smoothing <= 0
+        # y = e_pos - e_neg with e_pos, e_neg >= 0: |y| = e_pos + e_neg at the optimum
+        e = ca.SX.sym('e', 2 * 3 * n * K) if use_epi else ca.SX.zeros(0)
+        x = ca.vertcat(xb, e)
+        p = ca.SX.sym('p', 2)                        # (w_E, w_T)
+        self._nb, self._ne = xb.numel(), e.numel()
+
+        # --- dynamics: torque along the path, affine in (a, b) apart from friction ------
+        sb = ca.sqrt(b)
+        a = (b[1:] - b[:-1]) / (2 * ca.DM(dth))
+        b_mid = 0.5 * (b[1:] + b[:-1])
+        rep = lambda row: ca.repmat(ca.reshape(row, 1, -1), n, 1)  # noqa: E731
+        A = rep(a)
+        tau_f_nodes = friction(ca.DM(nodes.dq.T) * rep(sb))
+        tau_f_mid = friction(ca.DM(mids.dq.T) * rep(ca.sqrt(b_mid)))
+        m_n, c_n, g_n = ca.DM(nodes.m.T), ca.DM(nodes.c.T), ca.DM(nodes.g.T)
+        tau_mid = (ca.DM(mids.m.T) * A + ca.DM(mids.c.T) * rep(b_mid) + ca.DM(mids.g.T)
+                   + tau_f_mid)
+        rigid_start = m_n[:, :-1] * A + c_n[:, :-1] * rep(b[:-1]) + g_n[:, :-1]
+        rigid_end = m_n[:, 1:] * A + c_n[:, 1:] * rep(b[1:]) + g_n[:, 1:]
+        tau_start = rigid_start + tau_f_nodes[:, :-1]
+        tau_end = rigid_end + tau_f_nodes[:, 1:]
+        # Where joint i reverses inside interval k (or starts/stops), friction sweeps through
+        # its breakaway value F0_i between the nodes: there |rigid torque| <= tau_max - F0.
+        sgn_n, sgn_m = np.sign(nodes.dq.T), np.sign(mids.dq.T)
+        rev = (sgn_n[:, :-1] != sgn_n[:, 1:]) | (sgn_m != sgn_n[:, :-1])
+        if boundary == BOUNDARY_REST:            # starting from / stopping at v = 0
+            rev[:, 0] = rev[:, -1] = True
+        rev = rev.ravel(order='F')
+        self._rev_idx = np.flatnonzero(rev)
+        self._rev_joint = self._rev_idx % n
+        probe = ca.DM(np.array([[0.01, -0.01]] * n))
+        self._breakaway = np.abs(np.asarray(friction(probe))).max(axis=1)
+        # power per unit theta [J/rad] at interval start, midpoint and end, (3 n K,)
+        y = ca.vertcat(ca.vec(tau_start * ca.DM(nodes.dq[:-1].T)),
+                       ca.vec(tau_mid * ca.DM(mids.dq.T)),
+                       ca.vec(tau_end * ca.DM(nodes.dq[1:].T)))
+        w = ca.vec(ca.DM(np.tile(dth, (n, 1)))) / 6   # Simpson weights dth/6 (1, 4, 1)
+        W = ca.vertcat(w, 4 * w, w)
+
+        # --- objective -------------------------------------------------------------------
+        energy_exact = ca.dot(W, ca.fabs(y))
+        if use_epi:
+            e_pos, e_neg = e[:3 * n * K], e[3 * n * K:]
+            energy = ca.dot(W, e_pos + e_neg)
+        else:
+            energy = ca.dot(W, ca.sqrt(y ** 2 + self.abs_smoothing ** 2))
+        duration = ca.sum1(2 * ca.DM(dth) / (sb[:-1] + sb[1:]))
+        f = p[0] * energy + p[1] * duration
+
+        # --- path constraints (rows; bounds are set per solve) ---------------------------
+        ridx = self._rev_idx.tolist()
+        g_rows = [duration, b_mid, ca.vec(tau_start), ca.vec(tau_end),
+                  ca.vec(rigid_start)[ridx], ca.vec(rigid_end)[ridx]]
+        if use_epi:
+            g_rows += [y - e_pos + e_neg]            # = 0
+        g = ca.vertcat(*g_rows)
+        self._rows = np.cumsum([0] + [r.numel() for r in g_rows])
+
+        # --- solver ------------------------------------------------------------------------
+        nlp = {'x': x, 'p': p, 'f': f, 'g': g}
+        self._solver_cold = ca.nlpsol('transcription', 'ipopt', nlp,
+                                      ipopt_options(max_iter, tol))
+        # warm solver: capped iterations, then a cold solve takes over
+        self._solver_warm = ca.nlpsol('transcription_warm', 'ipopt', nlp,
+                                      ipopt_options(min(max_iter, 40), tol, warm=True))
+        self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_start),
+                                             ca.vec(tau_end), y])
+        self._b = ca.Function('b', [x], [b])
+        self._beta_nodes = None
+        self.build_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------------------------
+    def _bounds(self, req: SolveRequest):
+        n, N, K = self.n, self.N, self.N - 1
+        beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
+        beta_m = speed_bound(self.mids.dq, req.velocity_limit)
+        lo = req.min_theta_dot ** 2
+        if self.boundary == BOUNDARY_REST:
+            lbb, ubb = np.full(N - 2, lo), beta_n[1:-1]
+        else:
+            lbb, ubb = np.full(N - 1, lo), beta_n[:-1]
+        lbx = np.concatenate([lbb, np.zeros(self._ne)])
+        ubx = np.concatenate([ubb, np.full(self._ne, np.inf)])
+        if req.duration > 0:
+            lt, ut = req.duration, req.duration
+        else:
+            lt, ut = 0.0, np.inf
+        tau = np.repeat(np.asarray(req.torque_limit, float)[None, :], K, axis=0).ravel()
+        tau_rev = (np.asarray(req.torque_limit, float)[self._rev_joint]
+                   - self._breakaway[self._rev_joint])
+        lbg = [[lt], np.zeros(K), -tau, -tau, -tau_rev, -tau_rev]
+        ubg = [[ut], beta_m, tau, tau, tau_rev, tau_rev]
+        if self._ne:
+            lbg += [np.zeros(self._ne // 2)]
+            ubg += [np.zeros(self._ne // 2)]
+        return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
+
+    def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
+        """b constant at the requested mean speed (clipped to the bounds), e = |y|."""
+        nb = self._nb
+        if req.duration > 0:
+            b0 = (2 * np.pi / req.duration) ** 2
+        else:
+            b0 = 0.25 * np.min(ubx[:nb])
+        xb = np.clip(np.full(nb, b0), lbx[:nb], 0.95 * ubx[:nb])
+        x0 = np.concatenate([xb, np.zeros(self._ne)])
+        if self._ne:
+            y = np.asarray(self._aux(x0)[4]).ravel()
+            x0[nb:] = np.concatenate([np.maximum(y, 0), np.maximum(-y, 0)]) + 1e-3
+        return x0
+
+    def _close_to_last(self, req: SolveRequest) -> bool:
+        """Warm starts pay off only near the last solution (IPOPT's dual warm start is
+        unreliable after large changes): same weights and limits, duration within 20 %."""
+        if self._last is None:
+            return False
+        last = self._last[3]
+        same = (last.energy_weight == req.energy_weight
+                and last.time_weight == req.time_weight
+                and last.min_theta_dot == req.min_theta_dot
+                and np.array_equal(last.velocity_limit, req.velocity_limit)
+                and np.array_equal(last.torque_limit, req.torque_limit))
+        if req.duration > 0 and last.duration > 0:
+            return same and abs(req.duration / last.duration - 1) <= 0.2
+        return same and req.duration == last.duration
+
+    def solve(self, req: SolveRequest, warm: bool | None = None) -> TranscriptionResult:
+        """Solve for ``req``; warm start from the previous solution when there is one."""
+        with self._lock:
+            lbx, ubx, lbg, ubg = self._bounds(req)
+            p = [req.energy_weight, req.time_weight]
+            use_warm = self.use_warm_start if warm is None else warm
+            t0 = time.perf_counter()
+            if use_warm and self._close_to_last(req):
+                x0, lam_x, lam_g = self._last[:3]
+                x0 = np.clip(x0, lbx, ubx)
+                sol = self._solver_warm(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+                                        lam_x0=lam_x, lam_g0=lam_g)
+                stats = self._solver_warm.stats()
+                if not stats['success']:
+                    use_warm = False
+            else:
+                use_warm = False
+            iters = stats['iter_count'] if use_warm else 0
+            if not use_warm:
+                x0 = self.initial_guess(req, lbx, ubx)
+                sol = self._solver_cold(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+                stats = self._solver_cold.stats()
+                iters += stats['iter_count']
+            elapsed = time.perf_counter() - t0
+            x = np.asarray(sol['x']).ravel()
+            ok = bool(stats['success'])
+            if ok:
+                self._last = (x, np.asarray(sol['lam_x']).ravel(),
+                              np.asarray(sol['lam_g']).ravel(), req)
+        energy, duration, tau_s, tau_e, _ = (np.asarray(v).ravel() for v in self._aux(x))
+        b = np.maximum(np.asarray(self._b(x)).ravel(), 0.0)
+        if self.boundary == BOUNDARY_REST:
+            b[0] = b[-1] = 0.0
+        peak = np.maximum(np.abs(tau_s).reshape(-1, self.n).max(axis=0),
+                          np.abs(tau_e).reshape(-1, self.n).max(axis=0))
+        stats_out = SolveStats(str(stats['return_status']), ok, int(iters), elapsed)
+        try:
+            profile = ThetaProfile(self.nodes.theta, np.sqrt(b))
+        except ValueError:
+            profile = None
+            stats_out = SolveStats('invalid profile', False, int(iters), elapsed)
+        return TranscriptionResult(profile, float(energy[0]), float(duration[0]), peak,
+                                   stats_out)

@@ -1,0 +1,23 @@
+import numpy as np
+import pytest
+from irb_description.model import RobotModel
+
+from irb_planning.planner import Planner, PlannerSettings
+
+#: small grid so the package's tests stay fast on 2 cores
+TEST_GRID = 60
+
+
+@pytest.fixture(scope='session')
+def model() -> RobotModel:
+    return RobotModel.load()
+
+
+@pytest.fixture(scope='session')
+def planner(model) -> Planner:
+    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID))
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(2024)

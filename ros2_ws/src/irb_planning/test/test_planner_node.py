@@ -1,0 +1,125 @@
+"""The planner node in-process: private Context, explicit executor, futures (no sleeps)."""
+import os
+import uuid
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import Point  # noqa: E402
+from irb_interfaces.msg import PathSpec  # noqa: E402
+from irb_interfaces.srv import PlanPath  # noqa: E402
+from rcl_interfaces.srv import GetParameters  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory  # noqa: E402
+
+from irb_planning import messages  # noqa: E402
+from irb_planning.planner_node import PlannerNode  # noqa: E402
+
+pytestmark = pytest.mark.ros
+TIMEOUT = 120.0
+
+
+@pytest.fixture
+def ros():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '41')))
+    ns = f'/planner_test_{uuid.uuid4().hex[:8]}'
+    server = PlannerNode(context=ctx, namespace=ns,
+                         parameter_overrides=[Parameter('grid_size', value=40),
+                                              Parameter('evaluation_rate_hz', value=500.0)])
+    client = rclpy.create_node('planner_test_client', namespace=ns, context=ctx)
+    executor = MultiThreadedExecutor(num_threads=3, context=ctx)
+    executor.add_node(server)
+    executor.add_node(client)
+    yield server, client, executor, ns
+    executor.shutdown()
+    client.destroy_node()
+    server.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+def _request(**kw):
+    req = PlanPath.Request()
+    req.path = PathSpec(type='circle', center=Point(x=0.6, y=0.0, z=0.13), radius=0.15,
+                        direction=1)
+    req.objective = 'energy'
+    for k, v in kw.items():
+        if k == 'radius':
+            req.path.radius = v
+        else:
+            setattr(req, k, v)
+    return req
+
+
+def _call(client, executor, cli, req):
+    future = cli.call_async(req)
+    executor.spin_until_future_complete(future, timeout_sec=TIMEOUT)
+    assert future.done(), 'no answer in time'
+    return future.result()
+
+
+def test_plan_latch_and_keep_serving_after_bad_requests(ros, model):
+    server, client, executor, ns = ros
+    cli = client.create_client(PlanPath, 'plan_path')
+    assert cli.wait_for_service(timeout_sec=30.0)
+
+    resp = _call(client, executor, cli, _request(duration=4.0))
+    assert resp.success, resp.message
+    assert resp.error_code == PlanPath.Response.ERROR_NONE
+    assert list(resp.trajectory.joint_names) == model.joint_names
+    pts = resp.trajectory.points
+    assert len(pts) == 40 and len(pts[0].effort) == 3 and len(pts[0].accelerations) == 3
+    t_end = pts[-1].time_from_start.sec + 1e-9 * pts[-1].time_from_start.nanosec
+    assert t_end == pytest.approx(4.0, rel=1e-6)
+    assert resp.energy == pytest.approx(resp.optimizer_energy, rel=0.01)
+    assert resp.energy <= resp.baseline_energy and resp.baseline_feasible
+
+    # a late subscriber still gets the latched plan and theta profile
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         reliability=ReliabilityPolicy.RELIABLE)
+    got_traj = rclpy.task.Future()
+    got_theta = rclpy.task.Future()
+    client.create_subscription(JointTrajectory, 'planned_trajectory',
+                               lambda m: got_traj.done() or got_traj.set_result(m), latched)
+    client.create_subscription(Float64MultiArray, 'planned_theta_profile',
+                               lambda m: got_theta.done() or got_theta.set_result(m), latched)
+    executor.spin_until_future_complete(got_traj, timeout_sec=TIMEOUT)
+    executor.spin_until_future_complete(got_theta, timeout_sec=TIMEOUT)
+    assert got_traj.done() and len(got_traj.result().points) == 40
+    prof = messages.profile_from_msg(got_theta.result())
+    assert prof['t'][-1] == pytest.approx(4.0, rel=1e-6)
+    assert list(prof['theta_dot']) == pytest.approx(list(resp.theta_dot))
+
+    # bad requests: specific codes, and the node keeps serving
+    for req, code in [(_request(duration=4.0, radius=-0.1),
+                       PlanPath.Response.ERROR_INVALID_REQUEST),
+                      (_request(duration=4.0, objective='nope'),
+                       PlanPath.Response.ERROR_INVALID_REQUEST),
+                      (_request(duration=0.01), PlanPath.Response.ERROR_INFEASIBLE_DURATION),
+                      (_request(duration=4.0, friction_map='/no/such/map.yaml'),
+                       PlanPath.Response.ERROR_FRICTION_MAP)]:
+        bad = _call(client, executor, cli, req)
+        assert not bad.success and bad.error_code == code and bad.message
+    again = _call(client, executor, cli, _request(objective='trapezoid', duration=3.0))
+    assert again.success, again.message
+    assert again.energy == pytest.approx(again.baseline_energy)
+
+
+def test_solve_does_not_block_other_callbacks(ros):
+    server, client, executor, ns = ros
+    cli = client.create_client(PlanPath, 'plan_path')
+    params = client.create_client(GetParameters, f'{ns}/planner/get_parameters')
+    assert cli.wait_for_service(timeout_sec=30.0)
+    assert params.wait_for_service(timeout_sec=30.0)
+    # a big new grid: building and solving takes seconds
+    plan_future = cli.call_async(_request(duration=3.0, grid_size=400))
+    param_future = params.call_async(GetParameters.Request(names=['grid_size']))
+    executor.spin_until_future_complete(param_future, timeout_sec=TIMEOUT)
+    assert param_future.done()
+    assert param_future.result().values[0].integer_value == 40
+    assert not plan_future.done(), 'the parameter answer should come before the plan'
+    executor.spin_until_future_complete(plan_future, timeout_sec=TIMEOUT)
+    assert plan_future.done() and plan_future.result().success, plan_future.result().message

@@ -1,0 +1,64 @@
+"""Profiles without a solver: theta-profile algebra, trapezoid, Fourier evaluation."""
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from irb_planning.baselines import trapezoid_profile
+from irb_planning.fourier import fourier_basis, fourier_theta_ddot, fourier_theta_dot
+from irb_planning.profile import ThetaProfile
+
+
+def test_constant_speed_profile_times_and_sampling():
+    pr = ThetaProfile(np.linspace(0, 2 * np.pi, 11), np.full(11, 2.0))
+    assert_allclose(pr.duration, np.pi, rtol=1e-12)
+    theta, theta_dot, theta_ddot = pr.sample(np.array([0.0, 1.0, np.pi]))
+    assert_allclose(theta, [0.0, 2.0, 2 * np.pi], atol=1e-12)
+    assert_allclose(theta_dot, 2.0)
+    assert_allclose(theta_ddot, 0.0)
+
+
+def test_sampling_is_exact_for_constant_acceleration():
+    # theta = t^2 / 2 (a = 1) from rest: b = 2 theta is linear, so any grid is exact
+    theta = np.sort(np.r_[0.0, np.random.default_rng(1).uniform(0, 2 * np.pi, 7), 2 * np.pi])
+    pr = ThetaProfile(theta, np.sqrt(2 * theta))
+    assert_allclose(pr.duration, np.sqrt(4 * np.pi), rtol=1e-12)
+    t = np.linspace(0, pr.duration, 50)
+    th, thd, thdd = pr.sample(t)
+    assert_allclose(th, 0.5 * t ** 2, atol=1e-12)
+    assert_allclose(thd, t, atol=1e-12)
+    assert_allclose(thdd, 1.0, atol=1e-12)
+
+
+def test_profile_rejects_bad_input():
+    with pytest.raises(ValueError):
+        ThetaProfile(np.array([0.0, 1.0]), np.array([0.0, 0.0]))
+    with pytest.raises(ValueError):
+        ThetaProfile(np.array([0.0, np.nan]), np.array([1.0, 1.0]))
+
+
+@pytest.mark.parametrize('duration, ramp', [(1.0, 0.1), (10.0, 0.1), (3.0, 0.5)])
+def test_trapezoid_profile(duration, ramp):
+    pr = trapezoid_profile(duration, ramp)
+    assert_allclose(pr.duration, duration, rtol=1e-12)
+    assert pr.theta_dot[0] == 0 and pr.theta_dot[-1] == 0
+    v_c = 2 * np.pi / (duration * (1 - ramp))
+    assert_allclose(pr.theta_dot.max(), v_c, rtol=1e-12)
+    a = pr.theta_ddot
+    assert_allclose(np.abs(a[np.abs(a) > 1e-9]), v_c / (ramp * duration), rtol=1e-9)
+    # time at the end of the ramp
+    t_end_ramp = pr.times[np.argmax(pr.theta_dot >= v_c * (1 - 1e-12))]
+    assert_allclose(t_end_ramp, ramp * duration, rtol=1e-9)
+
+
+def test_fourier_profile_evaluation():
+    c = np.array([1.5, 0.2, -0.1, 0.05, 0.3, 0.0, -0.02])     # order 3
+    th = np.linspace(0, 2 * np.pi, 2001)
+    h = fourier_theta_dot(c, th)
+    expected = (1.5 + 0.2 * np.sin(th) - 0.1 * np.sin(2 * th) + 0.05 * np.sin(3 * th)
+                + 0.3 * np.cos(th) - 0.02 * np.cos(3 * th))
+    assert_allclose(h, expected, atol=1e-12)
+    assert_allclose(np.trapezoid(h, th) / (2 * np.pi), c[0], atol=1e-9)   # eq. 6.5
+    dh = np.gradient(h, th)
+    assert_allclose(fourier_theta_ddot(c, th)[5:-5], (dh * h)[5:-5], atol=1e-4)   # eq. 6.6
+    B, dB = fourier_basis(th, 3)
+    assert B.shape == dB.shape == (th.size, 7)
