@@ -17,7 +17,9 @@ setup(
     zip_safe=True,
     maintainer='IRB stack maintainers',
     maintainer_email='maintainers@irb-stack.dev',
-    description='PD+ controller with friction compensation, simulator and axis-computer bridge for the IRB 1600.',
+    description=(
+        'PD+ controller with friction compensation, simulator and axis-computer bridge '
+        'for the IRB 1600.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

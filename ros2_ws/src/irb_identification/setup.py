@@ -18,7 +18,9 @@ setup(
     zip_safe=True,
     maintainer='IRB stack maintainers',
     maintainer_email='maintainers@irb-stack.dev',
-    description='MCAP recording, replay, friction identification and the model-discrepancy workflow for the IRB 1600.',
+    description=(
+        'MCAP recording, replay, friction identification and the model-discrepancy '
+        'workflow for the IRB 1600.'),
     license='Apache-2.0',
     tests_require=['pytest'],
     entry_points={

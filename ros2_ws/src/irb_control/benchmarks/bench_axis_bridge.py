@@ -44,6 +44,7 @@ def main() -> int:
                                          params={**ports, 'duration_s': ns.seconds,
                                                  'stats_path': str(stats)}), required=False),
     ]
+    load_start = [round(x, 2) for x in os.getloadavg()]
     quiet = open(tmp / 'log.txt', 'w')
     with ProcessGroup(specs, log=lambda m: print(m, file=sys.stderr), stream=quiet) as group:
         done = group.wait_until(stats.exists, timeout_s=ns.seconds + 60)
@@ -58,6 +59,8 @@ def main() -> int:
            'cycles': cycles, 'answered': s['answered'], 'missed_cycles': s['missed'],
            'missed_fraction': s['missed_fraction'], 'latency_ms': s['latency_ms'],
            'axis_error_at_end': s['error'], 'machine_cores': os.cpu_count(),
+           'load_average_1_5_15_min_at_start': load_start,
+           'load_average_1_5_15_min_at_end': [round(x, 2) for x in os.getloadavg()],
            'goal': {'p99_ms_below': 1.0, 'missed_fraction_below': 0.001}}
     out['goal_met'] = bool(s['latency_ms'] and s['latency_ms']['p99'] < 1.0
                            and s['missed_fraction'] < 0.001)

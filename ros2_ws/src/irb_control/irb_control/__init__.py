@@ -1,1 +1,1 @@
-"""PD+ controller with friction compensation, simulator and axis-computer bridge for the IRB 1600."""
+"""PD+ controller with friction compensation, simulator and axis-computer bridge (IRB 1600)."""

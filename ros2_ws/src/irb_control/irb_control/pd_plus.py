@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-from irb_description.friction import FrictionMap
+from irb_description.friction import FrictionMap, JointFriction
 from irb_description.model import RobotModel
 from irb_description.path import CirclePath
 
@@ -143,6 +143,20 @@ class ControlOutput:
     rejected_input: bool = False
 
 
+def _parametric_friction(friction: FrictionMap | None) -> list | None:
+    """Per joint (F_c, F_s - F_c, v_s, F_v) when every joint of ``friction`` is purely
+    parametric (JointFriction.parametric), else None (FrictionMap.torque is used)."""
+    if friction is None or len(friction.joints) != 3:
+        return None
+    out = []
+    for j in friction.joints:
+        if (type(j) is not JointFriction or j.polynomial_positive is not None
+                or j.polynomial_negative is not None):
+            return None
+        out.append((j.coulomb, j.static - j.coulomb, j.stribeck_velocity, j.viscous))
+    return out
+
+
 class Watchdog:
     """Stale-measurement detector on a monotonic clock.
 
@@ -203,6 +217,10 @@ class PdPlusController:
         self._t0 = 0.0
         self._ramp_from = np.zeros(3)
         self._ramp_T = c.ramp_min_duration_s
+        self._two_pi = 2.0 * np.pi
+        self._circle = ((float(path.center[0]), float(path.center[1]), path.direction,
+                         path.start_angle) if type(path) is CirclePath else None)
+        self._friction_par = _parametric_friction(friction)
 
     # --- commands ------------------------------------------------------------------------
     def set_path_profile(self, profile: PathProfile) -> None:
@@ -248,20 +266,31 @@ class PdPlusController:
 
     # --- the step ------------------------------------------------------------------------
     def step(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
-        """One control step for the measurement q (3,) [rad], qd (3,) [rad/s] taken at t [s]."""
+        """One control step for the measurement q (3,) [rad], qd (3,) [rad/s] taken at t [s].
+
+        The 3-vectors are handled as plain floats (far cheaper than 3-element numpy arrays);
+        every operation is the element-wise one of the equations in the module docstring, in
+        the same order, so the result is the same to the bit as the array formulation.
+        """
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
-        if (q.shape != (3,) or qd.shape != (3,) or not math.isfinite(t)
-                or not np.all(np.isfinite(q)) or not np.all(np.isfinite(qd))):
-            self.rejected_inputs += 1
-            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason,
-                                 rejected_input=True)
+        if q.shape != (3,) or qd.shape != (3,) or not math.isfinite(t):
+            return self._rejected()
+        q0, q1, q2 = ql = q.tolist()
+        w0, w1, w2 = qd.tolist()
+        isfinite = math.isfinite
+        if not (isfinite(q0) and isfinite(q1) and isfinite(q2) and isfinite(w0)
+                and isfinite(w1) and isfinite(w2)):
+            return self._rejected()
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
         # safety on the measurement
-        if np.any(np.abs(qd) > self.v_max):
+        # (gains and limits are public arrays: read them every step, as plain floats)
+        vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
+        if abs(w0) > vm[0] or abs(w1) > vm[1] or abs(w2) > vm[2]:
             self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
-        elif np.any(q < self.q_lo) or np.any(q > self.q_hi):
+        elif (q0 < lo[0] or q1 < lo[1] or q2 < lo[2] or q0 > hi[0] or q1 > hi[1]
+              or q2 > hi[2]):
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
@@ -278,7 +307,7 @@ class PdPlusController:
             self.mode = MODE_RAMP
             self._prev_tau = None
 
-        out = ControlOutput(True, np.zeros(3), self.mode)
+        theta = theta_p = theta_dot_ref = math.nan
         d = self.delta
         tp = t + d
         if self.mode == MODE_RAMP and tp - self._t0 >= self._ramp_T:
@@ -287,16 +316,16 @@ class PdPlusController:
             self._theta = self.profile.theta_start if not self.time_driven else 0.0
             self._theta_v = self._theta
         if self.mode == MODE_RAMP:
-            q_ref, qd_ref, qdd_ref = quintic_ramp(self._ramp_from, self.start_pose(),
-                                                  self._ramp_T, tp - self._t0)
+            q_ref, qd_ref, qdd_ref = (x.tolist() for x in quintic_ramp(
+                self._ramp_from, self.start_pose(), self._ramp_T, tp - self._t0))
         elif self.mode == MODE_TIME or (self.mode == MODE_HOLD and self.time_driven):
-            row = self.profile.sample(tp - self._t0)
+            row = self.profile.sample_list(tp - self._t0)
             q_ref, qd_ref, qdd_ref = row[0:3], row[3:6], row[6:9]
             if tp - self._t0 >= self.profile.duration and self.mode == MODE_TIME:
                 self.mode = MODE_HOLD
         else:   # PATH or HOLD on a theta-profile
             prof = self.profile
-            raw = float(self.path.theta_of(self.model.fk(q)))
+            raw = self._theta_of(q)
             # unwrap against the previous theta, clamp to the profile
             dth = (raw - self._theta + math.pi) % (2 * math.pi) - math.pi
             theta = min(max(self._theta + dth, prof.theta_start), prof.theta_end)
@@ -310,51 +339,108 @@ class PdPlusController:
             th = tv
             for _ in range(self.config.prediction_samples):
                 th = min(th + T * prof.h(th), prof.theta_end)
-            out.theta, out.theta_predicted = theta, th
+            theta_p = th
             if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
                 self.mode = MODE_HOLD
-                q_ref, qd_ref, qdd_ref = prof.q[-1], np.zeros(3), np.zeros(3)
-                out.theta_dot_ref = 0.0
+                q_ref, qd_ref, qdd_ref = prof.q[-1].tolist(), [0.0] * 3, [0.0] * 3
+                theta_dot_ref = 0.0
             else:
-                row = prof.sample(th)
-                out.theta_dot_ref = row[0]
+                row = prof.sample_list(th)
+                theta_dot_ref = row[0]
                 q_ref, qd_ref, qdd_ref = row[2:5], row[5:8], row[8:11]
-        out.mode = self.mode
 
-        # delay compensation of the measurement
-        q_p = q + d * qd + 0.5 * d * d * qdd_ref
-        qd_p = qd + d * qdd_ref
-        e = q_ref - q_p
-        de = qd_ref - qd_p
-        if np.any(np.abs(e) > self.e_max):
-            self.stop(f'tracking error {np.abs(e).round(4).tolist()} rad > '
+        # delay compensation of the measurement: q_p = q + d qd + d^2/2 qdd_ref, qd_p = qd + d
+        # qdd_ref; errors e = q_ref - q_p, de = qd_ref - qd_p
+        a0, a1, a2 = qdd_ref
+        c2 = 0.5 * d * d
+        p0, p1, p2 = q0 + d * w0 + c2 * a0, q1 + d * w1 + c2 * a1, q2 + d * w2 + c2 * a2
+        u0, u1, u2 = w0 + d * a0, w1 + d * a1, w2 + d * a2
+        e = [q_ref[0] - p0, q_ref[1] - p1, q_ref[2] - p2]
+        de = [qd_ref[0] - u0, qd_ref[1] - u1, qd_ref[2] - u2]
+        em = self.e_max.tolist()
+        if abs(e[0]) > em[0] or abs(e[1]) > em[1] or abs(e[2]) > em[2]:
+            self.stop(f'tracking error {np.abs(np.array(e)).round(4).tolist()} rad > '
                       f'{self.e_max.tolist()}')
-            out.publish, out.mode, out.stop_reason = False, self.mode, self.stop_reason
-            return out
-        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g
-        M = pin.crba(self._pm, self._pd, q_p)
-        M = np.triu(M) + np.triu(M, 1).T
-        C = pin.computeCoriolisMatrix(self._pm, self._pd, q_p, qd_p)
-        g = pin.computeGeneralizedGravity(self._pm, self._pd, q_p)
-        tau_model = M @ qdd_ref + C @ qd_ref + g
+            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason, theta,
+                                 theta_p, theta_dot_ref)
+        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g (the products
+        # in numpy, as before: its matrix-vector product rounds differently from a plain sum)
+        q_p = np.array((p0, p1, p2))
+        pm, pd = self._pm, self._pd
+        (m00, m01, m02), (_, m11, m12), (_, _, m22) = pin.crba(pm, pd, q_p).tolist()
+        # symmetric M from the upper triangle pinocchio fills (= np.triu(M) + np.triu(M, 1).T)
+        M = np.array(((m00 + 0.0, m01 + 0.0, m02 + 0.0), (0.0 + m01, m11 + 0.0, m12 + 0.0),
+                      (0.0 + m02, 0.0 + m12, m22 + 0.0)))
+        qd_ref_a = np.array(qd_ref)
+        qdd_ref_a = np.array(qdd_ref)
+        Ma = (M @ qdd_ref_a).tolist()
+        Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array((u0, u1, u2))) @ qd_ref_a).tolist()
+        g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
+        tm = [Ma[0] + Cb[0] + g[0], Ma[1] + Cb[1] + g[1], Ma[2] + Cb[2] + g[2]]
         if self.friction is not None:
-            tau_f = self.friction.torque(friction_blend(qd_ref, qd_p,
-                                                        self.config.friction_blend_a))
+            tf = self._friction_torque(qd_ref, (u0, u1, u2))
         else:
-            tau_f = np.zeros(3)
-        tau_fb = self.kp * e + self.kd * de
-        tau = tau_model + tau_f + tau_fb
-        if not np.all(np.isfinite(tau)):
+            tf = [0.0, 0.0, 0.0]
+        kp, kd = self.kp.tolist(), self.kd.tolist()
+        fb = [kp[0] * e[0] + kd[0] * de[0], kp[1] * e[1] + kd[1] * de[1],
+              kp[2] * e[2] + kd[2] * de[2]]
+        tau = [tm[0] + tf[0] + fb[0], tm[1] + tf[1] + fb[1], tm[2] + tf[2] + fb[2]]
+        if not (isfinite(tau[0]) and isfinite(tau[1]) and isfinite(tau[2])):
             self.stop('non-finite torque computed')
-            out.publish, out.mode, out.stop_reason = False, self.mode, self.stop_reason
-            out.tau = np.zeros(3)
-            return out
-        if self._prev_tau is not None:
-            tau = np.clip(tau, self._prev_tau - self.rate_max, self._prev_tau + self.rate_max)
-        tau = np.clip(tau, -self.tau_max, self.tau_max)
-        self._prev_tau = tau
-        out.tau = tau
-        out.q_ref, out.qd_ref, out.qdd_ref = q_ref.copy(), qd_ref.copy(), qdd_ref.copy()
-        out.q_error, out.qd_error = e, de
-        out.tau_model, out.tau_friction, out.tau_feedback = tau_model, tau_f, tau_fb
+            return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason, theta,
+                                 theta_p, theta_dot_ref)
+        # rate limit around the previous command, then the torque limit (np.clip semantics:
+        # min(max(x, lo), hi))
+        prev = self._prev_tau.tolist() if self._prev_tau is not None else None
+        r, tmax = self.rate_max.tolist(), self.tau_max.tolist()
+        for i in range(3):
+            x = tau[i]
+            if prev is not None:
+                x = min(max(x, prev[i] - r[i]), prev[i] + r[i])
+            tau[i] = min(max(x, -tmax[i]), tmax[i])
+        tau_a = np.array(tau)
+        self._prev_tau = tau_a
+        return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
+                             np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
+                             np.array(tm), np.array(tf), np.array(fb))
+
+    def _rejected(self) -> ControlOutput:
+        self.rejected_inputs += 1
+        return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason,
+                             rejected_input=True)
+
+    def _theta_of(self, q: np.ndarray) -> float:
+        """theta of FK(q) about the path centre: ``float(path.theta_of(model.fk(q)))``, for a
+        CirclePath in plain floats with numpy's arctan2 (the same value to the bit)."""
+        c = self._circle
+        if c is None:
+            return float(self.path.theta_of(self.model.fk(q)))
+        cx, cy, direction, start = c
+        x, y, _ = self.model.fk(q).tolist()
+        ang = float(np.arctan2(y - cy, x - cx))
+        theta = (direction * (ang - start)) % self._two_pi
+        return 0.0 if theta >= self._two_pi else theta
+
+    def _friction_torque(self, qd_ref: list, qd_p: tuple) -> list:
+        """tau_f(v), v = friction_blend(qd_ref, qd_p, a) (eq. 4.9-4.10), as 3 floats.
+
+        The parametric maps of irb_description.friction in plain floats with numpy's exp on
+        the same operands (same value to the bit); maps with polynomials use FrictionMap."""
+        a = self.config.friction_blend_a
+        # alpha = exp(-qd_ref^2 / (2 a^2)) on the 3-vector (numpy's array exp, as before)
+        alpha = np.exp(np.array((-(qd_ref[0] * qd_ref[0]), -(qd_ref[1] * qd_ref[1]),
+                                 -(qd_ref[2] * qd_ref[2]))) / (2.0 * a * a)).tolist()
+        v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(3)]
+        par = self._friction_par
+        if par is None:
+            return self.friction.torque(np.array(v)).tolist()
+        out = []
+        exp = np.exp
+        for i in range(3):
+            fc, dfs, vs, fv = par[i]
+            x = v[i]
+            # (v / v_s)^2 with pow, as numpy's float64 scalar power does
+            st = dfs * float(exp(-((x / vs) ** 2)))
+            sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
+            out.append(sg * (fc + st) + fv * x)
         return out

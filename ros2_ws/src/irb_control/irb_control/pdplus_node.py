@@ -105,6 +105,9 @@ class PdPlusNode(Node):
         self.create_service(Trigger, '~/stop', self.on_stop)
         self.create_timer(cfg.period_s, self.on_watchdog, clock=self.steady)
         self._cmd = JointState(name=self.model.joint_names)
+        self._names = list(self.model.joint_names)
+        self._name_key: list | None = None      # msg.name of the last joint state ...
+        self._name_idx: list | None = None      # ... and the indices of joints 1-3 in it
         self._st = ControllerState()
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
@@ -138,22 +141,24 @@ class PdPlusNode(Node):
 
     # --- callbacks -----------------------------------------------------------------------
     def on_state(self, msg: JointState) -> None:
+        # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
         t_in = time.perf_counter()
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        q, qd = _by_name(msg, self.model.joint_names)
-        T = self.ctrl.config.period_s
-        if self._last_stamp is not None and stamp - self._last_stamp > 1.5 * T:
-            self.missed += int(round((stamp - self._last_stamp) / T)) - 1
-        self._last_stamp = stamp
+        q, qd = self._by_name(msg)
         was = self.ctrl.mode
         out = self.ctrl.step(stamp, q, qd)
-        if not out.rejected_input:
-            self.watchdog.feed(self.steady.now().nanoseconds * 1e-9)
         if out.publish:
             c = self._cmd
             c.header.stamp = msg.header.stamp
             c.effort = out.tau.tolist()
             self.pub_cmd.publish(c)
+        if not out.rejected_input:
+            # steady clock: time.monotonic() is CLOCK_MONOTONIC, as ROS's STEADY_TIME
+            self.watchdog.feed(time.monotonic())
+        T = self.ctrl.config.period_s
+        if self._last_stamp is not None and stamp - self._last_stamp > 1.5 * T:
+            self.missed += int(round((stamp - self._last_stamp) / T)) - 1
+        self._last_stamp = stamp
         dt = time.perf_counter() - t_in
         if dt > self.P['deadline_s']:
             self.missed += 1
@@ -183,7 +188,7 @@ class PdPlusNode(Node):
 
     def on_watchdog(self) -> None:
         if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):
-            now = self.steady.now().nanoseconds * 1e-9
+            now = time.monotonic()          # the clock of watchdog.feed
             if self.watchdog.expired(now):
                 self.ctrl.stop(f'watchdog: no valid joint_states for '
                                f'{now - self.watchdog.last:.4f} s')
@@ -230,6 +235,24 @@ class PdPlusNode(Node):
         response.success, response.message = True, 'stopped (latched until enable)'
         self.get_logger().warn('stop service: safe stop latched')
         return response
+
+
+    def _by_name(self, msg: JointState):
+        """``_by_name(msg, joint names)`` with the index lookup cached for repeated names."""
+        name = msg.name
+        if name and name == self._name_key:
+            idx = self._name_idx
+            try:
+                p, v = msg.position, msg.velocity
+                return (np.array([p[idx[0]], p[idx[1]], p[idx[2]]], float),
+                        np.array([v[idx[0]], v[idx[1]], v[idx[2]]], float))
+            except IndexError:
+                return np.full(3, np.nan), np.full(3, np.nan)
+        out = _by_name(msg, self._names)
+        if name and all(n in name for n in self._names):
+            self._name_key = list(name)
+            self._name_idx = [self._name_key.index(n) for n in self._names]
+        return out
 
 
 def _by_name(msg: JointState, names: list[str]):

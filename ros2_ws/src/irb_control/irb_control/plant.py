@@ -165,6 +165,7 @@ class Plant:
         self._fs = [float(x) for x in friction.static]
         self._vs = [float(x) for x in friction.stribeck_velocity]
         self._fv = [float(x) for x in friction.viscous]
+        self._dfs = [self._fs[i] - self._fc[i] for i in range(3)]     # F_s - F_c
         self.events: list[tuple[float, str]] = []
         self.camera: list[tuple[float, np.ndarray]] = []
         self.reset(np.asarray(config.initial_q, float))
@@ -197,7 +198,7 @@ class Plant:
         Non-finite or wrongly shaped commands are ignored (as a drive would reject them).
         """
         tau = np.asarray(tau, float)
-        if tau.shape != (3,) or not np.all(np.isfinite(tau)):
+        if tau.shape != (3,) or not all(map(math.isfinite, tau.tolist())):
             self.events.append((self.state.t, f'rejected invalid command {tau!r}'))
             return
         self._latest = tau.copy()
@@ -215,11 +216,18 @@ class Plant:
         """Encoder sample of the current state (quantised, noisy) and the applied torque."""
         c = self.config
         s = self.state
-        q = s.q + c.position_noise_rad * self._gauss()
-        if c.encoder_resolution_rad > 0:
-            q = np.round(q / c.encoder_resolution_rad) * c.encoder_resolution_rad
-        qd = s.qd + c.velocity_noise_rad_s * self._gauss()
-        return Measurement(s.t, q, qd, self.applied.copy())
+        # element-wise in floats (the same IEEE operations as on the arrays; round() is
+        # round-half-even like np.round)
+        pn, res, vn = c.position_noise_rad, c.encoder_resolution_rad, c.velocity_noise_rad_s
+        n0, n1, n2 = self._gauss().tolist()
+        q0, q1, q2 = s.q.tolist()
+        q = [q0 + pn * n0, q1 + pn * n1, q2 + pn * n2]
+        if res > 0:
+            q = [round(x / res) * res if math.isfinite(x) else x / res * res for x in q]
+        n0, n1, n2 = self._gauss().tolist()
+        v0, v1, v2 = s.qd.tolist()
+        return Measurement(s.t, np.array(q), np.array((v0 + vn * n0, v1 + vn * n1,
+                                                       v2 + vn * n2)), self.applied.copy())
 
     def take_camera(self) -> list[tuple[float, np.ndarray]]:
         """Camera samples (t [s], TCP (3,) [m]) taken since the last call."""
@@ -258,13 +266,18 @@ class Plant:
         for j in range(c.substeps):
             q_prev = s.q
             self._substep(taus[j])
-            self._camera(q_prev)
+            if self._next_camera_t <= s.t + 1e-12:      # a camera instant in this substep
+                self._camera(q_prev)
         s.t = t0 + c.period_s
         self.steps += 1
 
     def _substep(self, tau: list) -> None:
-        """One semi-implicit Euler substep of h [s]; tau (3,) list [N m]. Plain floats inside:
-        the 3-vectors are cheaper as Python lists than as numpy arrays."""
+        """One semi-implicit Euler substep of h [s]; tau (3,) list [N m].
+
+        Plain Python floats inside, unrolled over the 3 joints: the 3-vectors are far cheaper
+        as floats than as numpy arrays (this is the simulator's hot loop). The arithmetic is
+        the same, in the same order, as the documented equations (bit-for-bit: tested against
+        the generic active-set solver ``_solve_dry_friction``)."""
         s = self.state
         h = self._h
         if self.braked:
@@ -273,35 +286,88 @@ class Plant:
             s.t += h
             return
         q, v = s.q, s.qd
-        W = (h * pin.computeMinverse(self._pm, self._pd, q)).tolist()   # h M^-1
-        b = pin.nonLinearEffects(self._pm, self._pd, q, v).tolist()      # C v + g
+        (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = pin.computeMinverse(
+            self._pm, self._pd, q).tolist()
+        # W = h M^-1 (Delassus matrix of the dry friction)
+        w00, w01, w02 = h * m00, h * m01, h * m02
+        w10, w11, w12 = h * m10, h * m11, h * m12
+        w20, w21, w22 = h * m20, h * m21, h * m22
+        b0, b1, b2 = pin.nonLinearEffects(self._pm, self._pd, q, v).tolist()   # C v + g
         vl = v.tolist()
-        fv = self._fv
-        r = [tau[i] - b[i] - fv[i] * vl[i] for i in range(3)]
+        v0, v1, v2 = vl
+        t0, t1, t2 = tau
+        fv0, fv1, fv2 = self._fv
+        r0 = t0 - b0 - fv0 * v0
+        r1 = t1 - b1 - fv1 * v1
+        r2 = t2 - b2 - fv2 * v2
         fx = self._fx
         if fx is not None and fx.has_torque:
             x = fx.extra_torque(q.tolist(), vl, s.t)
-            r = [r[i] - x[i] for i in range(3)]
-        vf = [vl[i] + W[i][0] * r[0] + W[i][1] * r[1] + W[i][2] * r[2] for i in range(3)]
-        bound = [self._fc[i] + (self._fs[i] - self._fc[i])
-                 * math.exp(-(vl[i] / self._vs[i]) ** 2) for i in range(3)]
+            r0, r1, r2 = r0 - x[0], r1 - x[1], r2 - x[2]
+        # free velocity (no dry friction)
+        vf0 = v0 + w00 * r0 + w01 * r1 + w02 * r2
+        vf1 = v1 + w10 * r0 + w11 * r1 + w12 * r2
+        vf2 = v2 + w20 * r0 + w21 * r1 + w22 * r2
+        fc0, fc1, fc2 = self._fc
+        dfs0, dfs1, dfs2 = self._dfs
+        vs0, vs1, vs2 = self._vs
+        exp = math.exp
+        bd0 = fc0 + dfs0 * exp(-(v0 / vs0) ** 2)
+        bd1 = fc1 + dfs1 * exp(-(v1 / vs1) ** 2)
+        bd2 = fc2 + dfs2 * exp(-(v2 / vs2) ** 2)
         if fx is not None and fx.stribeck is not None:
-            bound = fx.dry_level(vl, bound)
-        lam = self._solve_dry_friction(W, vf, bound)
-        vn = [vf[i] - W[i][0] * lam[0] - W[i][1] * lam[1] - W[i][2] * lam[2]
-              for i in range(3)]
+            bd0, bd1, bd2 = fx.dry_level(vl, [bd0, bd1, bd2])
+        # fast path of the active-set solver: every joint slides on its own and keeps the
+        # direction of its free velocity with lambda_i = sign(vf_i) F_i (the first pattern
+        # ``_solve_dry_friction`` tries, accepted there under exactly the same test)
+        vn = None
+        if (abs(vf0) > w00 * bd0 and abs(vf1) > w11 * bd1 and abs(vf2) > w22 * bd2):
+            sgn = math.copysign
+            s0, s1, s2 = sgn(1.0, vf0), sgn(1.0, vf1), sgn(1.0, vf2)
+            l0, l1, l2 = s0 * bd0, s1 * bd1, s2 * bd2
+            n0 = vf0 - w00 * l0 - w01 * l1 - w02 * l2
+            n1 = vf1 - w10 * l0 - w11 * l1 - w12 * l2
+            n2 = vf2 - w20 * l0 - w21 * l1 - w22 * l2
+            if n0 * s0 >= 0.0 and n1 * s1 >= 0.0 and n2 * s2 >= 0.0:
+                lam = [l0, l1, l2]
+                vn = [n0, n1, n2]
+        elif (abs(vf0) <= w00 * bd0 and abs(vf1) <= w11 * bd1 and abs(vf2) <= w22 * bd2):
+            # ... and when every joint sticks on its own: lambda = W^-1 vf, accepted if it
+            # stays inside every friction bound (again the solver's first pattern and test)
+            W = [[w00, w01, w02], [w10, w11, w12], [w20, w21, w22]]
+            lam = _solve_small(W, [vf0, vf1, vf2])
+            l0, l1, l2 = lam
+            if (abs(l0) <= bd0 * (1.0 + 1e-12) and abs(l1) <= bd1 * (1.0 + 1e-12)
+                    and abs(l2) <= bd2 * (1.0 + 1e-12)):
+                vn = [vf0 - w00 * l0 - w01 * l1 - w02 * l2,
+                      vf1 - w10 * l0 - w11 * l1 - w12 * l2,
+                      vf2 - w20 * l0 - w21 * l1 - w22 * l2]
+        if vn is None:
+            W = [[w00, w01, w02], [w10, w11, w12], [w20, w21, w22]]
+            lam = self._solve_dry_friction(W, [vf0, vf1, vf2], [bd0, bd1, bd2])
+            l0, l1, l2 = lam
+            vn = [vf0 - w00 * l0 - w01 * l1 - w02 * l2,
+                  vf1 - w10 * l0 - w11 * l1 - w12 * l2,
+                  vf2 - w20 * l0 - w21 * l1 - w22 * l2]
         # sticking joints come out at ~1e-17 rad/s; make them exactly zero
-        vn = [0.0 if abs(x) < 1e-12 else x for x in vn]
-        ql = q.tolist()
-        s.q = np.array([ql[i] + h * vn[i] for i in range(3)])
-        s.qd = np.array(vn)
+        n0, n1, n2 = vn
+        if abs(n0) < 1e-12:
+            n0 = 0.0
+        if abs(n1) < 1e-12:
+            n1 = 0.0
+        if abs(n2) < 1e-12:
+            n2 = 0.0
+        q0, q1, q2 = q.tolist()
+        s.q = np.array((q0 + h * n0, q1 + h * n1, q2 + h * n2))
+        s.qd = np.array((n0, n1, n2))
         self._lam = lam
         self._vprev = vl
         if fx is not None and fx.link_side:
             # torque through the gear: applied minus everything on the motor side
             xt = x if fx.has_torque else [0.0, 0.0, 0.0]
-            self._tau_t = [tau[i] - lam[i] - fv[i] * vl[i] - xt[i] for i in range(3)]
-        s.energy += h * (abs(tau[0] * vn[0]) + abs(tau[1] * vn[1]) + abs(tau[2] * vn[2]))
+            self._tau_t = [t0 - lam[0] - fv0 * v0 - xt[0], t1 - lam[1] - fv1 * v1 - xt[1],
+                           t2 - lam[2] - fv2 * v2 - xt[2]]
+        s.energy += h * (abs(t0 * n0) + abs(t1 * n1) + abs(t2 * n2))
         s.t += h
 
     @property
@@ -323,22 +389,34 @@ class Plant:
         projected Gauss-Seidel sweep is the fallback).
         """
         # initial pattern: a joint slides if it would slide on its own
-        sign = [0.0 if abs(vf[i]) <= W[i][i] * bound[i] else math.copysign(1.0, vf[i])
-                for i in range(3)]
+        # (explicit loops instead of comprehensions: this runs in the plant's hot loop)
+        copysign = math.copysign
+        sign = [0.0, 0.0, 0.0]
+        for i in (0, 1, 2):
+            if not abs(vf[i]) <= W[i][i] * bound[i]:
+                sign[i] = copysign(1.0, vf[i])
         for _ in range(6):
-            stick = [i for i in range(3) if sign[i] == 0.0]
-            lam = [sign[i] * bound[i] for i in range(3)]
+            lam = [sign[0] * bound[0], sign[1] * bound[1], sign[2] * bound[2]]
+            stick = []
+            slide = []
+            for i in (0, 1, 2):
+                (stick if sign[i] == 0.0 else slide).append(i)
             if stick:
-                rhs = [vf[i] - sum(W[i][j] * lam[j] for j in range(3) if sign[j] != 0.0)
-                       for i in stick]
+                rhs = []
+                for i in stick:
+                    Wi = W[i]
+                    acc = 0.0               # sum of W_ij lambda_j over the sliding joints
+                    for j in slide:
+                        acc += Wi[j] * lam[j]
+                    rhs.append(vf[i] - acc)
                 sol = _solve_small([[W[i][j] for j in stick] for i in stick], rhs)
                 for k, i in enumerate(stick):
                     lam[i] = sol[k]
             changed = False
-            for i in range(3):
+            for i in (0, 1, 2):
                 if sign[i] == 0.0:
                     if abs(lam[i]) > bound[i] * (1.0 + 1e-12):
-                        sign[i] = math.copysign(1.0, lam[i])
+                        sign[i] = copysign(1.0, lam[i])
                         changed = True
                 else:
                     Wi = W[i]

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 @dataclass(frozen=True)
 class ProcessSpec:
-    """One process of the graph: ``name`` for logs, ``cmd`` argv, ``required`` = stop all on exit."""
+    """One process: ``name`` for logs, ``cmd`` argv, ``required``: its exit stops the graph."""
 
     name: str
     cmd: tuple[str, ...]

@@ -12,6 +12,8 @@
 """
 from __future__ import annotations
 
+import math
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +63,10 @@ class PathProfile:
         # one table for a single interpolation call per step: [theta_dot, theta_ddot, q, qd, qdd]
         object.__setattr__(self, '_table', np.column_stack(
             [self.theta_dot, self.theta_ddot, self.q, self.qd, self.qdd]))
+        _set_interp_cache(self, self.theta)
+        thl, hl = self._xl, self._rows_l
+        object.__setattr__(self, '_h_slope', [(hl[i + 1][0] - hl[i][0]) / (thl[i + 1] - thl[i])
+                                              for i in range(n - 1)])
 
     @property
     def theta_start(self) -> float:
@@ -71,8 +77,20 @@ class PathProfile:
         return float(self.theta[-1])
 
     def h(self, theta: float) -> float:
-        """theta_dot [rad/s] at theta [rad] (clamped to the grid)."""
-        return float(np.interp(theta, self.theta, self.theta_dot))
+        """theta_dot [rad/s] at theta [rad] (clamped to the grid).
+
+        Linear interpolation exactly as ``np.interp(theta, self.theta, self.theta_dot)`` (same
+        operations, same result to the bit), in plain floats: called 4 times per control step.
+        """
+        x = self._xl
+        if not theta <= x[-1]:          # beyond the end (np.interp: right value; NaN: NaN)
+            return self._rows_l[-1][0] if theta > x[-1] else math.nan
+        if theta < x[0]:
+            return self._rows_l[0][0]
+        j = bisect_right(x, theta) - 1
+        if j == len(x) - 1 or x[j] == theta:
+            return self._rows_l[j][0]
+        return self._h_slope[j] * (theta - x[j]) + self._rows_l[j][0]
 
     def sample(self, theta: float) -> np.ndarray:
         """Row (11,): theta_dot, theta_ddot, q (3), qd (3), qdd (3) at theta (clamped)."""
@@ -84,6 +102,10 @@ class PathProfile:
         i = int(np.searchsorted(th, theta)) - 1
         w = (theta - th[i]) / (th[i + 1] - th[i])
         return self._table[i] + w * (self._table[i + 1] - self._table[i])
+
+    def sample_list(self, theta: float) -> list:
+        """``sample(theta)`` as a list of 11 floats (same values to the bit, ~10x faster)."""
+        return _sample_list(self, theta, False)
 
     def check_limits(self, model: RobotModel, speed_fraction: float = 1.0) -> None:
         """ProfileError if q leaves the position limits or |qd| exceeds the speed limits."""
@@ -115,6 +137,7 @@ class TimeTrajectory:
         if np.any(np.diff(self.t) <= 0):
             raise ProfileError('trajectory time must be strictly increasing')
         object.__setattr__(self, '_table', np.column_stack([self.q, self.qd, self.qdd]))
+        _set_interp_cache(self, self.t)
 
     @property
     def duration(self) -> float:
@@ -134,12 +157,39 @@ class TimeTrajectory:
         w = (t - tt[i]) / (tt[i + 1] - tt[i])
         return self._table[i] + w * (self._table[i + 1] - self._table[i])
 
+    def sample_list(self, t: float) -> list:
+        """``sample(t)`` as a list of 9 floats (same values to the bit, ~10x faster)."""
+        return _sample_list(self, t, True)
+
     def check_limits(self, model: RobotModel, speed_fraction: float = 1.0) -> None:
         lim = model.limits
         if np.any(self.q < lim.lower) or np.any(self.q > lim.upper):
             raise ProfileError('trajectory leaves the joint position limits')
         if np.any(np.abs(self.qd) > speed_fraction * lim.velocity):
             raise ProfileError('trajectory exceeds the speed limits')
+
+
+def _set_interp_cache(obj, grid: np.ndarray) -> None:
+    """Plain-float copies of the grid and the table rows for the per-step interpolation."""
+    object.__setattr__(obj, '_xl', np.asarray(grid, float).tolist())
+    object.__setattr__(obj, '_rows_l', obj._table.tolist())
+
+
+def _sample_list(obj, x: float, zero_rates_after_end: bool) -> list:
+    """Row of ``obj._table`` at x, linear, clamped: the arithmetic of ``sample`` in floats
+    (numpy's element-wise a + w (b - a) is IEEE per element, so the result is identical)."""
+    xl, rows = obj._xl, obj._rows_l
+    if x <= xl[0]:
+        return rows[0][:]
+    if x >= xl[-1]:
+        row = rows[-1][:]
+        if zero_rates_after_end:
+            row[3:] = [0.0] * (len(row) - 3)
+        return row
+    i = bisect_left(xl, x) - 1          # = np.searchsorted(grid, x) - 1
+    w = (x - xl[i]) / (xl[i + 1] - xl[i])
+    a, b = rows[i], rows[i + 1]
+    return [a[k] + w * (b[k] - a[k]) for k in range(len(a))]
 
 
 # --- builders ------------------------------------------------------------------------------

@@ -15,13 +15,12 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from .node_util import declare, run_node, state_qos
+from .node_util import declare, make_executor, run_node, state_qos
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
 from .plant_effects import load_plant_effects
 
@@ -72,6 +71,8 @@ class SimulatorNode(Node):
                                        'lockstep: wall time to wait for a command [s]'),
             'stats_path': declare(self, 'stats_path', '',
                                   "write loop statistics JSON here at exit ('' = no)"),
+            'executor': declare(self, 'executor', 'events',
+                                "'events' (EventsExecutor, lower latency) or 'single'"),
         }
         self.p = p
         if p['mode'] not in ('realtime', 'lockstep'):
@@ -97,6 +98,9 @@ class SimulatorNode(Node):
         self.pub_clock = (self.create_publisher(Clock, '/clock', qos_profile_sensor_data)
                           if self.lockstep else None)
         self.create_subscription(JointState, 'torque_command', self.on_command, state_qos())
+        self._state_msg = JointState(name=self.joint_names)     # reused every sample
+        self._effort_names: list | None = None   # msg.name of the last command ...
+        self._effort_idx: list | None = None     # ... and the indices of joints 1-3 in it
         # loop statistics: state publish time per stamp, latency of the matching command
         self._sent: dict[int, float] = {}
         self._answered_k = -1
@@ -114,7 +118,7 @@ class SimulatorNode(Node):
     # --- command -------------------------------------------------------------------------
     def on_command(self, msg: JointState) -> None:
         now = time.monotonic()
-        tau = _effort_by_name(msg, self.joint_names)
+        tau = self._effort(msg)
         if tau is None:
             self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
                                    throttle_duration_sec=1.0)
@@ -126,12 +130,24 @@ class SimulatorNode(Node):
             self.latencies.append(now - t_sent)
             self._answered_k = self._k
 
+    def _effort(self, msg: JointState) -> np.ndarray | None:
+        """``_effort_by_name`` with the index lookup cached for repeated joint names."""
+        name, effort = msg.name, msg.effort
+        if name and name == self._effort_names and len(effort) == len(name):
+            i = self._effort_idx
+            return np.array([effort[i[0]], effort[i[1]], effort[i[2]]], float)
+        tau = _effort_by_name(msg, self.joint_names)
+        if tau is not None and name and len(name) == len(effort):
+            idx = {n: i for i, n in enumerate(name)}
+            self._effort_names = list(name)
+            self._effort_idx = [idx[n] for n in self.joint_names]
+        return tau
+
     # --- loop ----------------------------------------------------------------------------
     def _publish_state(self, stamp: Time) -> None:
         y = self.plant.measure()
-        msg = JointState()
+        msg = self._state_msg
         msg.header.stamp = stamp
-        msg.name = self.joint_names
         msg.position = y.q.tolist()
         msg.velocity = y.qd.tolist()
         msg.effort = y.tau.tolist()
@@ -192,9 +208,11 @@ class SimulatorNode(Node):
                 self._count_deadline()
                 self.plant.step()
             self._k += 1
+            # camera points and log lines first: the state goes out last so that nothing
+            # delays the reception of its command (the latency the loop is measured by)
+            self._after_step(lambda t: _stamp(t0_ros + t))
             stamp = self.get_clock().now().to_msg()
             self._publish_state(stamp)
-            self._after_step(lambda t: _stamp(t0_ros + t))
             next_tick += T
             if time.monotonic() - next_tick > 10 * T:       # fell far behind: resynchronise
                 next_tick = time.monotonic() + T
@@ -223,7 +241,7 @@ def _effort_by_name(msg: JointState, names: list[str]) -> np.ndarray | None:
 
 
 def _spin(node: SimulatorNode) -> None:
-    executor = SingleThreadedExecutor()
+    executor = make_executor(node.p['executor'])
     executor.add_node(node)
     try:
         node.run(executor)

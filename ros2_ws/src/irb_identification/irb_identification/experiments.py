@@ -117,7 +117,7 @@ class ExperimentsNode(Node):
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         bags = []
         for j, prof, q0, name in self.runs():
-            rec = RecorderNode(node_name=f'experiments_recorder', context=self.context,
+            rec = RecorderNode(node_name='experiments_recorder', context=self.context,
                                parameter_overrides=[
                                    Parameter('root', value=str(self.root)),
                                    Parameter('name', value=name),

@@ -224,11 +224,10 @@ def identify_series(series_list: list[JointSeries], joint_names: list[str],
     eq. 4.8's tau_f is computed either way.
     """
     segs = {j: [] for j in range(len(joint_names))}
-    mt = None
-    if model is not None:
-        def mt(q, qd):
-            zero = np.zeros(q.shape[1])
-            return np.array([model.inverse_dynamics(a, b, zero) for a, b in zip(q, qd)])
+    def model_torque(q, qd):
+        zero = np.zeros(q.shape[1])
+        return np.array([model.inverse_dynamics(a, b, zero) for a, b in zip(q, qd)])
+    mt = model_torque if model is not None else None
     for s in series_list:
         s = s.select(joint_names)
         for j in segs:

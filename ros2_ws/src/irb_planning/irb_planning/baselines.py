@@ -8,27 +8,36 @@ Convex lower bound
 ------------------
 Split the power per unit theta of joint i into y = x + d: x = (m a + c b + g)_i Phi'_i is affine
 in (a, b) and d = tau_f,i Phi'_i >= 0 is the friction dissipation (a passive friction map;
-parametric Coulomb F_c, breakaway F_s >= F_c, viscous F_v). With v = Phi' sqrt(b):
+parametric Coulomb F_c, breakaway F_s >= F_c, viscous F_v, Stribeck speed v_s). With
+v = Phi' sqrt(b) and u = v^2 / v_s^2 = Phi'^2 b / v_s^2:
 
-    d = (F_c + (F_s - F_c) exp(-Phi'^2 b / v_s^2)) |Phi'| + F_v Phi'^2 sqrt(b)
-    d <= F_s |Phi'| + F_v Phi'^2 sqrt(b)
+    d = F_c |Phi'| + |Phi'| G(u),   G(u) = (F_s - F_c) exp(-u) + F_v v_s sqrt(u)
 
 Introduce s <= sqrt(b) (s^2 <= b, convex). Then |y| = max(y, -y) >= l with
 
-    l = max( x + F_c |Phi'| + (F_s - F_c) exp(-Phi'^2 b / v_s^2) |Phi'| + F_v Phi'^2 s ,
-             -x - F_s |Phi'| - F_v Phi'^2 sqrt(b) )
+    l = max( x + F_c |Phi'| + (F_s - F_c) exp(-u) |Phi'| + F_v Phi'^2 s ,
+             -x - F_c |Phi'| - |Phi'| Ghat(u) )
 
-which is convex in (b, s) (exp(-k b) convex, sqrt(b) concave). The duration T = sum 2 dth /
-(sqrt b_k + sqrt b_{k+1}) is relaxed to sum 2 dth / (s_k + s_{k+1}) <= T_req (convex, >= the
-true T), the torque limits to what the friction interval above implies (affine, or concave >=
-const), the speed limits and theta_dot >= delta are kept. Every feasible point of the
-transcription (with s = sqrt b) is feasible here with objective <= its energy, so the global
-optimum of this convex problem (IPOPT finds it: convex objective and constraints) is a lower
-bound on the energy of any profile on this grid and quadrature. It is tight when the
-dissipation bounds are tight: few braking phases (x + d < 0, where F_s replaces the real
-Coulomb + Stribeck friction) and s = sqrt(b), which the duration constraint enforces wherever
-time is scarce. It ignores the tanh smoothing of the optimiser's friction and holds for the
-parametric map only (not for polynomial maps).
+where Ghat >= G is the concave envelope (least concave majorant) of G on u >= 0, computed once
+per joint (``stribeck_envelope``): G itself where G is concave, the bitangent line across the
+Stribeck dip (for the nominal map u in [0.01, ~95], i.e. |v| < ~0.5 rad/s; above that the
+braking branch is exact). The first branch is convex in (b, s) (exp(-k b) convex), the second
+too (Ghat(k b) concave). The duration T = sum 2 dth / (sqrt b_k + sqrt b_{k+1}) is relaxed to
+sum 2 dth / (s_k + s_{k+1}) <= T_req (convex, >= the true T), the torque limits to what the
+friction interval implies, the speed limits and theta_dot >= delta are kept, and
+
+    b_k <= (delta + s_max,k) s_k - delta s_max,k     (secant of s^2 on [delta, s_max,k])
+
+with s_max,k = sqrt(speed bound) couples b back to s from above (without it the relaxation
+could raise b, i.e. store kinetic energy, for free while s, which pays the viscous term and the
+time, stays low). Every feasible point of the transcription (s = sqrt b) is feasible here with
+objective <= its energy, so the global optimum of this convex problem (IPOPT finds it) is a
+lower bound on the energy of any profile on this grid and quadrature. Where it is loose: (i)
+the secant is wide (s_max is set by the joint speed limits, 3-10 x the speeds of a slow
+profile), so at long durations the relaxation still stores kinetic energy it need not pay
+for; (ii) braking at |v| < ~0.5 rad/s (F_s-like envelope instead of the real Coulomb +
+Stribeck friction). It ignores the tanh smoothing of the optimiser's friction and holds for
+the parametric map only (not for polynomial maps).
 """
 from __future__ import annotations
 
@@ -41,6 +50,40 @@ import numpy as np
 from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
 from .profile import ThetaProfile
 from .transcription import BOUNDARY_REST, SolveRequest
+
+
+def stribeck_envelope(delta_f: float, viscous: float, stribeck_velocity: float
+                      ) -> tuple[float, float, float]:
+    """Concave envelope of G(u) = delta_f exp(-u) + viscous v_s sqrt(u) on u >= 0.
+
+    Returns (u1, u2, margin): Ghat = G outside [u1, u2] and the chord of G through u1, u2
+    (plus ``margin`` >= 0, covering the grid the hull is found on) inside. (0, 0, 0) if G is
+    concave (no Stribeck dip). delta_f = F_s - F_c [N m], viscous [N m s/rad], v_s [rad/s].
+    """
+    def G(u):
+        return delta_f * np.exp(-u) + viscous * stribeck_velocity * np.sqrt(u)
+    u = np.concatenate([[0.0], np.geomspace(1e-9, 1e4, 100001)])
+    y = G(u)
+    hull = []
+    for i in range(u.size):                       # upper hull, monotone chain
+        while len(hull) >= 2:
+            i1, i2 = hull[-2], hull[-1]
+            if (y[i2] - y[i1]) * (u[i] - u[i1]) <= (y[i] - y[i1]) * (u[i2] - u[i1]):
+                hull.pop()
+            else:
+                break
+        hull.append(i)
+    gaps = [(a, b) for a, b in zip(hull[:-1], hull[1:]) if b - a > 1]
+    if not gaps:
+        return 0.0, 0.0, 0.0
+    a, b = max(gaps, key=lambda ab: u[ab[1]] - u[ab[0]])
+    if len(gaps) > 1:      # one dip expected; more would need a piecewise envelope
+        a, b = gaps[0][0], gaps[-1][1]
+    u1, u2 = float(u[a]), float(u[b])
+    slope = (y[b] - y[a]) / (u2 - u1)
+    uu = np.union1d(np.geomspace(u1, u2, 200001), np.linspace(u1, u2, 200001))
+    margin = max(0.0, float(np.max(G(uu) - (y[a] + slope * (uu - u1))))) + 1e-12
+    return u1, u2, margin
 
 
 def trapezoid_profile(duration: float, ramp_fraction: float = 0.1, n: int = 401
@@ -93,6 +136,18 @@ class EnergyBound:
         Fs = np.array([j.static for j in friction_map.joints])
         Fv = np.array([j.viscous for j in friction_map.joints])
         vs = np.array([j.stribeck_velocity for j in friction_map.joints])
+        env = [stribeck_envelope(Fs[i] - Fc[i], Fv[i], vs[i]) for i in range(n)]
+
+        def g_hat(u, i):
+            """Concave majorant of (F_s - F_c) exp(-u) + F_v v_s sqrt(u) (joint i)."""
+            G = (Fs[i] - Fc[i]) * ca.exp(-u) + Fv[i] * vs[i] * ca.sqrt(u)
+            u1, u2, margin = env[i]
+            if u2 <= u1:
+                return G
+            g1 = (Fs[i] - Fc[i]) * np.exp(-u1) + Fv[i] * vs[i] * np.sqrt(u1)
+            g2 = (Fs[i] - Fc[i]) * np.exp(-u2) + Fv[i] * vs[i] * np.sqrt(u2)
+            chord = g1 + (g2 - g1) / (u2 - u1) * (u - u1) + margin
+            return ca.if_else(ca.logic_and(u > u1, u < u2), chord, G)
 
         # --- decision variables: b (as in the transcription), s <= sqrt(b), epigraph e ---
         if boundary == BOUNDARY_REST:
@@ -121,10 +176,12 @@ class EnergyBound:
             absdq, dq2 = np.abs(dq), dq ** 2
             sq = rep(ca.sqrt(bp))
             S = rep(sp)
-            stribeck = ca.DM((Fs - Fc)[:, None] * absdq) * ca.exp(
-                -ca.DM(dq2 / vs[:, None] ** 2) * rep(bp))             # convex in b
+            U = ca.DM(dq2 / vs[:, None] ** 2) * rep(bp)             # (v / v_s)^2
+            stribeck = ca.DM((Fs - Fc)[:, None] * absdq) * ca.exp(-U)  # convex in b
             d_lo = ca.DM(Fc[:, None] * absdq) + ca.DM(Fv[:, None] * dq2) * S + stribeck
-            d_hi = ca.DM(Fs[:, None] * absdq) + ca.DM(Fv[:, None] * dq2) * sq
+            # concave in b: Coulomb + |Phi'| * concave envelope of (Stribeck + viscous)
+            G_hat = ca.vertcat(*[g_hat(U[i, :], i) for i in range(n)])
+            d_hi = ca.DM(Fc[:, None] * absdq) + ca.DM(absdq) * G_hat
             lower_rows.append(ca.vec(xr + d_lo))      # e >= x + d_lo
             upper_rows.append(ca.vec(xr + d_hi))      # e >= -(x + d_hi)
             pos, neg = (dq > 0).astype(float), (dq < 0).astype(float)
@@ -148,10 +205,13 @@ class EnergyBound:
 
         # --- path constraints ------------------------------------------------------------
         b_mid = 0.5 * (b[1:] + b[:-1])
+        # secant of s^2 on [delta, s_max]: b <= (delta + s_max) s - delta s_max (per solve)
+        p = ca.SX.sym('p', xb.numel())                # delta + s_max at the free nodes
         g_rows = [duration, b_mid, xs ** 2 - xb, e - E_lo, e + E_hi,
-                  ca.vertcat(*tau_lo_rows), ca.vertcat(*tau_hi_rows)]
+                  ca.vertcat(*tau_lo_rows), ca.vertcat(*tau_hi_rows), xb - p * xs]
         self._sizes = [r.numel() for r in g_rows]
-        self._solver = ca.nlpsol('bound', 'ipopt', {'x': x, 'f': f, 'g': ca.vertcat(*g_rows)},
+        self._solver = ca.nlpsol('bound', 'ipopt', {'x': x, 'p': p, 'f': f,
+                                                    'g': ca.vertcat(*g_rows)},
                                  ipopt_options(max_iter, tol))
         self._ne = e.numel()
         self._dur = ca.Function('dur', [x], [duration])
@@ -169,13 +229,16 @@ class EnergyBound:
         ubx = np.concatenate([ubb, np.sqrt(ubb), np.full(self._ne, np.inf)])
         tau = np.tile(np.asarray(req.torque_limit, float), 3 * K)
         inf = np.full(3 * n * K, np.inf)
+        s_max = np.sqrt(ubb)
         lbg = np.concatenate([[0.0], np.zeros(K), np.full(nb, -np.inf), np.zeros(3 * n * K),
-                              np.zeros(3 * n * K), -inf, -tau])
-        ubg = np.concatenate([[req.duration], beta_m, np.zeros(nb), inf, inf, tau, inf])
+                              np.zeros(3 * n * K), -inf, -tau, np.full(nb, -np.inf)])
+        ubg = np.concatenate([[req.duration], beta_m, np.zeros(nb), inf, inf, tau, inf,
+                              -req.min_theta_dot * s_max])
         b0 = np.clip((2 * np.pi / req.duration) ** 2, lo, 0.95 * ubb)
         x0 = np.concatenate([b0, np.sqrt(b0), np.full(self._ne, 1.0)])
         t0 = time.perf_counter()
-        sol = self._solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        sol = self._solver(x0=x0, p=req.min_theta_dot + s_max, lbx=lbx, ubx=ubx, lbg=lbg,
+                           ubg=ubg)
         st = self._solver.stats()
         elapsed = time.perf_counter() - t0
         x = np.asarray(sol['x']).ravel()

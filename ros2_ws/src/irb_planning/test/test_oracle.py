@@ -49,6 +49,8 @@ def test_energy_optimum_agrees_with_evaluator_and_beats_trapezoid(planner, t_min
     assert bound <= res.optimizer_energy * (1 + 1e-6)
     assert bound <= ev.energy * (1 + AGREEMENT)
     assert bound >= 0.9 * ev.energy
+    if factor < 2:     # where time is scarce the relaxation is tight (README: within 1 %)
+        assert bound >= 0.99 * res.optimizer_energy
 
 
 def test_trapezoid_result_is_the_evaluator_energy(planner, model):

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from irb_planning.baselines import trapezoid_profile
+from irb_planning.baselines import stribeck_envelope, trapezoid_profile
 from irb_planning.fourier import fourier_basis, fourier_theta_ddot, fourier_theta_dot
 from irb_planning.profile import ThetaProfile
 
@@ -62,3 +62,23 @@ def test_fourier_profile_evaluation():
     assert_allclose(fourier_theta_ddot(c, th)[5:-5], (dh * h)[5:-5], atol=1e-4)   # eq. 6.6
     B, dB = fourier_basis(th, 3)
     assert B.shape == dB.shape == (th.size, 7)
+
+
+@pytest.mark.parametrize('df, fv, vs', [(6.0, 25.0, 0.05), (3.0, 12.0, 0.05), (10.0, 1.0, 0.1)])
+def test_stribeck_envelope_is_a_concave_majorant(df, fv, vs):
+    u1, u2, margin = stribeck_envelope(df, fv, vs)
+    assert 0 < u1 < u2
+
+    def G(u):
+        return df * np.exp(-u) + fv * vs * np.sqrt(u)
+
+    def G_hat(u):
+        chord = G(u1) + (G(u2) - G(u1)) / (u2 - u1) * (u - u1) + margin
+        return np.where((u > u1) & (u < u2), chord, G(u))
+    u = np.concatenate([[0.0], np.geomspace(1e-7, 1e3, 20001)])
+    gh = G_hat(u)
+    assert np.all(gh >= G(u) - 1e-12)
+    # concave: every point lies on or above the chord of its neighbours (uneven spacing)
+    w = (u[1:-1] - u[:-2]) / (u[2:] - u[:-2])
+    assert np.all(gh[1:-1] >= (1 - w) * gh[:-2] + w * gh[2:] - 1e-9)
+    assert margin < 1e-6 * df

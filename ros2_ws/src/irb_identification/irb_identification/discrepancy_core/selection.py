@@ -149,6 +149,14 @@ def fit_torque(name: str, P: Pooled, w: np.ndarray, grids: Grids, fixed: Candida
                 X = torque_columns(name, P, j, s)[m]
                 beta, rss1, res = _wls(X, y, ww)
                 fits.append((rss1, s, beta, res, X.shape[1]))
+            if per_joint_scale and fixed is None and len(cands) > 2:
+                # refine the profiled scale between the coarse neighbours of the best one
+                i = int(np.argmin([f[0] for f in fits]))
+                lo, hi = cands[max(i - 1, 0)], cands[min(i + 1, len(cands) - 1)]
+                for s in np.geomspace(lo, hi, 25)[1:-1]:
+                    X = torque_columns(name, P, j, float(s))[m]
+                    beta, rss1, res = _wls(X, y, ww)
+                    fits.append((rss1, float(s), beta, res, X.shape[1]))
             rss1, s, beta, res, p = min(fits, key=lambda f: f[0])
             if tau_ratio is not None and (name, j) in tau_ratio:
                 n_eff = float(ww.sum()) / tau_ratio[(name, j)]
