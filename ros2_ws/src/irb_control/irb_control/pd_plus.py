@@ -276,7 +276,7 @@ class PdPlusController:
         qd = np.asarray(qd, dtype=float)
         if q.shape != (3,) or qd.shape != (3,) or not math.isfinite(t):
             return self._rejected()
-        q0, q1, q2 = ql = q.tolist()
+        q0, q1, q2 = q.tolist()
         w0, w1, w2 = qd.tolist()
         isfinite = math.isfinite
         if not (isfinite(q0) and isfinite(q1) and isfinite(q2) and isfinite(w0)

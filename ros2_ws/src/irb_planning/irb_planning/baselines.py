@@ -167,7 +167,7 @@ class EnergyBound:
             (nodes, slice(0, K), b[:-1], s[:-1]),
             (mids, slice(0, K), 0.5 * (b[:-1] + b[1:]), 0.5 * (s[:-1] + s[1:])),
             (nodes, slice(1, N), b[1:], s[1:])]
-        lower_rows, upper_rows, dis_rows, tau_lo_rows, tau_hi_rows = [], [], [], [], []
+        lower_rows, upper_rows, tau_lo_rows, tau_hi_rows = [], [], [], []
         for dyn, sl, bp, sp in pts:
             dq = dyn.dq[sl].T                                        # (n, K)
             rigid = (ca.DM(dyn.m[sl].T) * rep(a) + ca.DM(dyn.c[sl].T) * rep(bp)

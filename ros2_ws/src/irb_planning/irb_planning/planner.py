@@ -27,8 +27,8 @@ from .problem import (casadi_friction, casadi_inverse_dynamics, effective_speed_
                       path_dynamics)
 from .profile import ThetaProfile
 from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVALID_REQUEST,
-                      ERROR_SOLVER, ERROR_UNREACHABLE, OBJECTIVE_ENERGY, OBJECTIVE_FOURIER,
-                      OBJECTIVE_TIME, OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
+                      ERROR_SOLVER, ERROR_UNREACHABLE, OBJECTIVE_ENERGY, OBJECTIVE_TIME,
+                      OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, TIME_OBJECTIVE_ENERGY_WEIGHT, SolveRequest,
                             Transcription)
 

@@ -172,7 +172,7 @@ class Transcription:
 
     # ------------------------------------------------------------------------------------
     def _bounds(self, req: SolveRequest):
-        n, N, K = self.n, self.N, self.N - 1
+        N, K = self.N, self.N - 1
         beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
         beta_m = speed_bound(self.mids.dq, req.velocity_limit)
         lo = req.min_theta_dot ** 2
