@@ -86,17 +86,26 @@ def plot_runs(runs: list[RunFigures], out_dir: Path) -> dict[str, str]:
     import matplotlib.pyplot as plt
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {}
-    fig, ax = plt.subplots(figsize=(8, 3.5))
-    for r in runs:
-        ax.plot(r.t, r.power, label=f'{r.label}: {r.energy:.1f} J')
-    ax.set(xlabel='time from path start [s]', ylabel='power sum |tau qd| [W]',
-           title='Power along the circle (cf. thesis fig. 7.1)')
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    files['power'] = str(out_dir / 'power.png')
-    fig.savefig(files['power'], dpi=110)
-    plt.close(fig)
+
+    def save(fig, key, name):
+        fig.tight_layout()
+        files[key] = str(out_dir / name)
+        fig.savefig(files[key], dpi=110)
+        plt.close(fig)
+
+    def lines(key, name, series, ylabel, title):
+        """One axis, one line per run: series(run) -> (x, y, label)."""
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        for r in runs:
+            x, y, label = series(r)
+            ax.plot(x, y, label=label)
+        ax.set(xlabel='time from path start [s]', ylabel=ylabel, title=title)
+        ax.legend()
+        ax.grid(alpha=0.3)
+        save(fig, key, name)
+
+    lines('power', 'power.png', lambda r: (r.t, r.power, f'{r.label}: {r.energy:.1f} J'),
+          'power sum |tau qd| [W]', 'Power along the circle (cf. thesis fig. 7.1)')
     fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
     for r in runs:
         for j in range(3):
@@ -109,21 +118,10 @@ def plot_runs(runs: list[RunFigures], out_dir: Path) -> dict[str, str]:
     axes[-1, 0].set_xlabel('time [s]')
     axes[-1, 1].set_xlabel('time [s]')
     fig.suptitle('Torques and joint speeds (cf. thesis fig. 7.2)')
-    fig.tight_layout()
-    files['torques'] = str(out_dir / 'torques_speeds.png')
-    fig.savefig(files['torques'], dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(8, 3.5))
-    for r in runs:
-        ax.plot(r.t_cam, 1e3 * r.err, label=f'{r.label}: mean {r.err_mean_mm:.3f} mm')
-    ax.set(xlabel='time from path start [s]', ylabel='camera path error [mm]',
-           title='Path error from the camera (cf. thesis figs. 4.15-4.20)')
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    files['path_error'] = str(out_dir / 'path_error.png')
-    fig.savefig(files['path_error'], dpi=110)
-    plt.close(fig)
+    save(fig, 'torques', 'torques_speeds.png')
+    lines('path_error', 'path_error.png',
+          lambda r: (r.t_cam, 1e3 * r.err, f'{r.label}: mean {r.err_mean_mm:.3f} mm'),
+          'camera path error [mm]', 'Path error from the camera (cf. thesis figs. 4.15-4.20)')
     return files
 
 

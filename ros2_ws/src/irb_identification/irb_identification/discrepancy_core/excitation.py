@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .bagdata import write_run
+from .bagdata import RunData, write_run
 
 PERIOD_S = 0.004032
 
@@ -74,17 +74,10 @@ def sweep_trajectory(spec: RunSpec, dt: float = PERIOD_S):
 
 @dataclass
 class SimulatedRun:
-    """Arrays of one run as they go into a bag (see bagdata.RunData)."""
+    """One simulated run: its spec, the arrays as they go into a bag, the plant's events."""
 
     spec: RunSpec
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    effort: np.ndarray
-    cmd_t: np.ndarray
-    cmd: np.ndarray
-    cam_t: np.ndarray
-    cam_p: np.ndarray
+    data: RunData
     events: list = field(default_factory=list)
 
 
@@ -122,8 +115,9 @@ def run_plan(model, plan: list[RunSpec], plant_friction, controller_friction=Non
         effort = np.vstack([last_effort, res.tau_applied[:-1]])
         last_effort = res.tau_applied[-1].copy()
         pub = res.published
-        runs.append(SimulatedRun(spec, res.t, res.q_meas, res.qd_meas, effort, res.t[pub],
-                                 res.tau_cmd[pub], res.cam_t, res.cam_p, list(res.events)))
+        data = RunData(res.t, res.q_meas, res.qd_meas, effort, res.t[pub], res.tau_cmd[pub],
+                       res.cam_t, res.cam_p, spec.label())
+        runs.append(SimulatedRun(spec, data, list(res.events)))
         if log:
             log(f'{spec.label()}: {res.t[-1] - res.t[0]:.1f} s, {len(res.t)} samples')
     return runs
@@ -137,7 +131,8 @@ def write_runs(runs: list[SimulatedRun], out_dir: str | Path, joint_names: list[
         meta = {'experiment': 'discrepancy_excitation', 'run': r.spec.label(),
                 'source': 'irb_identification.discrepancy_core.excitation'}
         meta.update({k: str(v) for k, v in (custom_data or {}).items()})
+        d = r.data
         out.append(write_run(Path(out_dir) / f'{prefix}_{i:02d}_{r.spec.label()}',
-                             joint_names, r.t, r.q, r.qd, r.effort, r.cmd_t, r.cmd, r.cam_t,
-                             r.cam_p, custom_data=meta))
+                             joint_names, d.t, d.q, d.qd, d.effort, d.cmd_t, d.cmd, d.cam_t,
+                             d.cam_p, custom_data=meta))
     return out
