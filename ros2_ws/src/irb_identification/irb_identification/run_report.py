@@ -73,6 +73,8 @@ def run_figures(bag: str | Path, label: str, center: np.ndarray, radius: float) 
     pts = [store.deserialize_cdr(d, cam.msgtype) for d in cam.data]
     t_cam = np.array([_stamp(m) for m in pts])
     p = np.array([[m.point.x, m.point.y, m.point.z] for m in pts]).reshape(-1, 3)
+    order = np.argsort(t_cam, kind='stable')   # camera points arrive in batches, not in order
+    t_cam, p = t_cam[order], p[order]
     sel = (t_cam >= t0) & (t_cam <= t1)
     return RunFigures(label, str(bag), t, power, tau, qd, t_cam[sel] - t0,
                       circle_error(p[sel], np.asarray(center, float), radius),
