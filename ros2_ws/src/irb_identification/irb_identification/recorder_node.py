@@ -10,8 +10,9 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
+from irb_control.node_util import spin_until_signal
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from .bagio import BagExistsError, BagWriter, TopicInfo, needs_recovery, recover_bag
@@ -135,11 +136,16 @@ def main(args=None):
         print(f'recorder: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        # the signal ends the loop between callbacks: a KeyboardInterrupt inside a write
+        # callback would leave a half-written record in the file that close() then finishes
+        spin_until_signal(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        executor.shutdown()
         node.close()
         node.destroy_node()
         rclpy.try_shutdown()
