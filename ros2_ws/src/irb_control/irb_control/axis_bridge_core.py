@@ -47,7 +47,8 @@ class BridgeCore:
         self.link_up = False
 
     def request_reset(self) -> None:
-        """The next command sent carries reset = 1 (clears the axis computer's latched errors)."""
+        """Commands carry reset = 1 until a state reports no error: a single reset command
+        could be dropped or answer the wrong cycle, and the latched error would stay."""
         self._reset_pending = True
 
     def on_datagram(self, data: bytes, now: float) -> tuple[StatePacket | None, str | None]:
@@ -71,6 +72,8 @@ class BridgeCore:
             event = 'up' if self.stats.link_losses == 0 else 'recovered'
             self.link_up = True
         self.last_state, self._last_state_time, self._answered = state, now, False
+        if state.error == 0:
+            self._reset_pending = False
         self.stats.states += 1
         return state, event
 
@@ -89,9 +92,8 @@ class BridgeCore:
             return None
         self._answered = True
         self.stats.commands_sent += 1
-        reset, self._reset_pending = self._reset_pending, False
         return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE,
-                                            reset))
+                                            self._reset_pending))
 
     def check_link(self, now: float) -> str | None:
         """'lost' once when no valid state arrived for ``link_timeout_s``, else None."""

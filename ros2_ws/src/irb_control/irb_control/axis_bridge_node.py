@@ -107,7 +107,7 @@ class AxisBridge(Node):
         with self.lock:
             self.core.request_reset()
         response.success = True
-        response.message = 'the next command carries reset = 1'
+        response.message = 'commands carry reset = 1 until the axis computer reports no error'
         return response
 
     def on_timer(self) -> None:

@@ -128,10 +128,17 @@ def test_link_loss_and_recovery_are_reported_once():
     assert event == 'recovered' and b.stats.link_losses == 1
 
 
-def test_reset_request_rides_on_the_next_command_only():
+def test_reset_is_repeated_until_the_axis_computer_reports_no_error():
+    def latched(seq):
+        s = state(seq)
+        s.error = 1
+        return encode_state(s)
     b = BridgeCore()
+    b.on_datagram(latched(1), 0.0)
+    assert not decode_command(b.on_command(np.zeros(6), 0.001)).reset   # not requested yet
     b.request_reset()
-    b.on_datagram(encode_state(state(1)), 0.0)
-    assert decode_command(b.on_command(np.zeros(6), 0.001)).reset
-    b.on_datagram(encode_state(state(2)), 0.004)
-    assert not decode_command(b.on_command(np.zeros(6), 0.005)).reset
+    for seq in (2, 3):                       # e.g. the first reset was lost: still latched
+        b.on_datagram(latched(seq), 0.004 * seq)
+        assert decode_command(b.on_command(np.zeros(6), 0.004 * seq + 0.001)).reset
+    b.on_datagram(encode_state(state(4)), 0.016)                        # error cleared
+    assert not decode_command(b.on_command(np.zeros(6), 0.017)).reset
