@@ -48,7 +48,7 @@ import casadi as ca
 import numpy as np
 
 from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
-from .profile import ThetaProfile
+from .profile import TIME_SUBSTEPS, ThetaProfile, quadratic_b
 from .transcription import BOUNDARY_REST, SolveRequest
 
 
@@ -149,32 +149,41 @@ class EnergyBound:
             chord = g1 + (g2 - g1) / (u2 - u1) * (u - u1) + margin
             return ca.if_else(ca.logic_and(u > u1, u < u2), chord, G)
 
-        # --- decision variables: b (as in the transcription), s <= sqrt(b), epigraph e ---
+        # --- decision variables: b, a (as in the transcription), s <= sqrt(b), e ----------
+        J = TIME_SUBSTEPS
         if boundary == BOUNDARY_REST:
             xb, xs = ca.SX.sym('b', N - 2), ca.SX.sym('s', N - 2)
             b, s = ca.vertcat(0, xb, 0), ca.vertcat(0, xs, 0)
+            xa = ca.SX.sym('a', N)
+            a = xa
         else:
             xb, xs = ca.SX.sym('b', N - 1), ca.SX.sym('s', N - 1)
             b, s = ca.vertcat(xb, xb[0]), ca.vertcat(xs, xs[0])
-        e = ca.SX.sym('e', 3 * n * K)
-        x = ca.vertcat(xb, xs, e)
-        self._nb = xb.numel()
+            xa = ca.SX.sym('a', N - 1)
+            a = ca.vertcat(xa, xa[0])
+        s_sub = ca.SX.sym('s_sub', (J - 1) * K)      # s at the time-law pieces, <= sqrt(b)
+        e = ca.SX.sym('e', n * (N + K))
+        x = ca.vertcat(xb, xa, xs, s_sub, e)
+        self._nb, self._na, self._nsub = xb.numel(), xa.numel(), s_sub.numel()
+        D = ca.DM(dth)
+        b_sub = ca.vertcat(*[quadratic_b(b[:-1], a[:-1], a[1:], D, D * (j / J))
+                             for j in range(1, J)])
+        s_pieces = [s[:-1]] + [s_sub[j * K:(j + 1) * K] for j in range(J - 1)] + [s[1:]]
+        b_mid = b_sub[(J // 2 - 1) * K:(J // 2) * K]
+        s_mid = s_pieces[J // 2]
 
-        # --- dynamics at interval start, midpoint, end (columns = points) ---------------
-        a = (b[1:] - b[:-1]) / (2 * ca.DM(dth))
+        # --- dynamics at the nodes and midpoints (columns = points) ----------------------
         rep = lambda row: ca.repmat(ca.reshape(row, 1, -1), n, 1)  # noqa: E731
-        pts = [  # (PathDynamics columns, b at the point, s at the point)
-            (nodes, slice(0, K), b[:-1], s[:-1]),
-            (mids, slice(0, K), 0.5 * (b[:-1] + b[1:]), 0.5 * (s[:-1] + s[1:])),
-            (nodes, slice(1, N), b[1:], s[1:])]
+        pts = [  # (PathDynamics, a, b, s at its points)
+            (nodes, a, b, s),
+            (mids, 0.5 * (a[:-1] + a[1:]), b_mid, s_mid)]
         lower_rows, upper_rows, tau_lo_rows, tau_hi_rows = [], [], [], []
-        for dyn, sl, bp, sp in pts:
-            dq = dyn.dq[sl].T                                        # (n, K)
-            rigid = (ca.DM(dyn.m[sl].T) * rep(a) + ca.DM(dyn.c[sl].T) * rep(bp)
-                     + ca.DM(dyn.g[sl].T))
+        for dyn, ap, bp, sp in pts:
+            dq = dyn.dq.T                                            # (n, points)
+            rigid = (ca.DM(dyn.m.T) * rep(ap) + ca.DM(dyn.c.T) * rep(bp) + ca.DM(dyn.g.T))
             xr = rigid * ca.DM(dq)
             absdq, dq2 = np.abs(dq), dq ** 2
-            sq = rep(ca.sqrt(bp))
+            sq = rep(ca.sqrt(ca.fmax(bp, 1e-12)))
             S = rep(sp)
             U = ca.DM(dq2 / vs[:, None] ** 2) * rep(bp)             # (v / v_s)^2
             stribeck = ca.DM((Fs - Fc)[:, None] * absdq) * ca.exp(-U)  # convex in b
@@ -196,55 +205,83 @@ class EnergyBound:
             tau_lo_rows.append(ca.vec(rigid + f_lo))  # <= tau_max
             tau_hi_rows.append(ca.vec(rigid + f_hi))  # >= -tau_max
         E_lo, E_hi = ca.vertcat(*lower_rows), ca.vertcat(*upper_rows)
-        w = ca.vec(ca.DM(np.tile(dth, (n, 1)))) / 6
-        W = ca.vertcat(w, 4 * w, w)
+        wn = np.zeros(N)
+        wn[:-1] += dth / 6
+        wn[1:] += dth / 6                          # Simpson weights dth/6 (1, 4, 1)
+        W = ca.vertcat(ca.vec(ca.DM(np.tile(wn, (n, 1)))),
+                       ca.vec(ca.DM(np.tile(4 * dth / 6, (n, 1)))))
 
         # --- objective: Simpson sum of the epigraph ---------------------------------------
         f = ca.dot(W, e)
-        duration = ca.sum1(2 * ca.DM(dth) / (s[:-1] + s[1:]))
+        duration = ca.sum1(sum(2 * D / J / (s_pieces[j] + s_pieces[j + 1])
+                               for j in range(J)))
 
         # --- path constraints ------------------------------------------------------------
-        b_mid = 0.5 * (b[1:] + b[:-1])
         # secant of s^2 on [delta, s_max]: b <= (delta + s_max) s - delta s_max (per solve)
-        p = ca.SX.sym('p', xb.numel())                # delta + s_max at the free nodes
-        g_rows = [duration, b_mid, xs ** 2 - xb, e - E_lo, e + E_hi,
-                  ca.vertcat(*tau_lo_rows), ca.vertcat(*tau_hi_rows), xb - p * xs]
+        p = ca.SX.sym('p', xb.numel() + s_sub.numel())  # delta + s_max: free nodes, pieces
+        collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * D
+        g_rows = [duration, b_mid, xs ** 2 - xb, s_sub ** 2 - b_sub, b_sub, collocation,
+                  e - E_lo, e + E_hi, ca.vertcat(*tau_lo_rows), ca.vertcat(*tau_hi_rows),
+                  xb - p[:xb.numel()] * xs, b_sub - p[xb.numel():] * s_sub]
         self._sizes = [r.numel() for r in g_rows]
         self._solver = ca.nlpsol('bound', 'ipopt', {'x': x, 'p': p, 'f': f,
                                                     'g': ca.vertcat(*g_rows)},
                                  ipopt_options(max_iter, tol))
         self._ne = e.numel()
         self._dur = ca.Function('dur', [x], [duration])
-        self._bfun = ca.Function('b', [x], [b])
+        self._bafun = ca.Function('ba', [x], [b, a])
         self.build_time = time.perf_counter() - t0
 
     def solve(self, req: SolveRequest) -> BoundResult:
         """Lower bound for the fixed duration req.duration (> 0) and the request's limits."""
-        nb, n, K = self._nb, self.n, self.N - 1
+        nb, na, nsub, n, N, K = self._nb, self._na, self._nsub, self.n, self.N, self.N - 1
         beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
         beta_m = speed_bound(self.mids.dq, req.velocity_limit)
         ubb = beta_n[1:-1] if self.boundary == BOUNDARY_REST else beta_n[:-1]
         lo = req.min_theta_dot ** 2
-        lbx = np.concatenate([np.full(nb, lo), np.zeros(nb), np.zeros(self._ne)])
-        ubx = np.concatenate([ubb, np.sqrt(ubb), np.full(self._ne, np.inf)])
-        tau = np.tile(np.asarray(req.torque_limit, float), 3 * K)
-        inf = np.full(3 * n * K, np.inf)
+        lo_sub = np.full(K, lo)
+        if self.boundary == BOUNDARY_REST:
+            lo_sub[0] = lo_sub[-1] = 0.0
+        # b at a piece end <= 9/8 max(b_k, b_mid, b_k+1) (quadratic through the three
+        # values); at the midpoint b <= beta_m directly
+        beta_all = np.concatenate([[0.0], ubb, [0.0]]) if self.boundary == BOUNDARY_REST \
+            else np.append(ubb, ubb[0])
+        beta_int = 9.0 / 8.0 * np.maximum(np.maximum(beta_all[:-1], beta_all[1:]), beta_m)
+        J = TIME_SUBSTEPS
+        s_sub_max = np.sqrt(np.concatenate([beta_m if j == J // 2 else beta_int
+                                            for j in range(1, J)]))
+        delta_sub = np.sqrt(np.tile(lo_sub, J - 1))
+        lbx = np.concatenate([np.full(nb, lo), np.full(na, -np.inf), np.zeros(nb),
+                              np.zeros(nsub), np.zeros(self._ne)])
+        ubx = np.concatenate([ubb, np.full(na, np.inf), np.sqrt(ubb), s_sub_max,
+                              np.full(self._ne, np.inf)])
+        tau = np.tile(np.asarray(req.torque_limit, float), N + K)
+        inf = np.full(n * (N + K), np.inf)
         s_max = np.sqrt(ubb)
-        lbg = np.concatenate([[0.0], np.zeros(K), np.full(nb, -np.inf), np.zeros(3 * n * K),
-                              np.zeros(3 * n * K), -inf, -tau, np.full(nb, -np.inf)])
-        ubg = np.concatenate([[req.duration], beta_m, np.zeros(nb), inf, inf, tau, inf,
-                              -req.min_theta_dot * s_max])
+        lbg = np.concatenate([[0.0], np.zeros(K), np.full(nb, -np.inf),
+                              np.full(nsub, -np.inf), np.tile(lo_sub, TIME_SUBSTEPS - 1),
+                              np.zeros(K), np.zeros(n * (N + K)), np.zeros(n * (N + K)),
+                              -inf, -tau, np.full(nb, -np.inf), np.full(nsub, -np.inf)])
+        ubg = np.concatenate([[req.duration], beta_m, np.zeros(nb), np.zeros(nsub),
+                              np.full(nsub, np.inf), np.zeros(K), inf, inf, tau, inf,
+                              -req.min_theta_dot * s_max, -delta_sub * s_sub_max])
         b0 = np.clip((2 * np.pi / req.duration) ** 2, lo, 0.95 * ubb)
-        x0 = np.concatenate([b0, np.sqrt(b0), np.full(self._ne, 1.0)])
+        bn = np.concatenate([[0.0], b0, [0.0]]) if self.boundary == BOUNDARY_REST else \
+            np.append(b0, b0[0])
+        a_int = np.diff(bn) / (2 * np.diff(self.nodes.theta))
+        a0 = np.concatenate([a_int[:1], 0.5 * (a_int[:-1] + a_int[1:]), a_int[-1:]])[:na]
+        x0 = np.concatenate([b0, a0, np.sqrt(b0),
+                             np.full(nsub, 2 * np.pi / req.duration), np.full(self._ne, 1.0)])
         t0 = time.perf_counter()
-        sol = self._solver(x0=x0, p=req.min_theta_dot + s_max, lbx=lbx, ubx=ubx, lbg=lbg,
+        p = np.concatenate([req.min_theta_dot + s_max, delta_sub + s_sub_max])
+        sol = self._solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg,
                            ubg=ubg)
         st = self._solver.stats()
         elapsed = time.perf_counter() - t0
         x = np.asarray(sol['x']).ravel()
-        b = np.maximum(np.asarray(self._bfun(x)).ravel(), 0.0)
+        b, a = (np.asarray(v).ravel() for v in self._bafun(x))
         try:
-            profile = ThetaProfile(self.nodes.theta, np.sqrt(b))
+            profile = ThetaProfile(self.nodes.theta, np.sqrt(np.maximum(b, 0.0)), a)
         except ValueError:
             profile = None
         stats = SolveStats(str(st['return_status']), bool(st['success']),

@@ -2,8 +2,8 @@
 
 ``/planned_theta_profile`` (std_msgs/Float64MultiArray): a 4 x N row-major matrix, layout
 dim[0] = 'rows: t_s, theta_rad, theta_dot_rad_s, theta_ddot_rad_s2' (size 4, stride 4 N),
-dim[1] = 'nodes' (size N, stride N); b = theta_dot^2 is linear in theta between nodes
-(theta_ddot constant per interval; the row holds node values = mean of the neighbours).
+dim[1] = 'nodes' (size N, stride N). The planner's profiles have theta_ddot linear in theta
+between nodes (b = theta_dot^2 quadratic, profile.ThetaProfile); the rows hold node values.
 """
 from __future__ import annotations
 

@@ -97,15 +97,17 @@ class PlannerNode(Node):
 
 def main(args=None):
     rclpy.init(args=args)
-    node = PlannerNode()
-    executor = MultiThreadedExecutor(num_threads=2)
-    executor.add_node(node)
-    try:
+    node = None
+    try:                       # Ctrl-C while the node is built must not print a traceback
+        node = PlannerNode()
+        executor = MultiThreadedExecutor(num_threads=2)
+        executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        node.destroy_node()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
 
 

@@ -1,21 +1,28 @@
-"""Direct transcription on a theta-grid in b = theta_dot^2 (Verscheure et al. 2009), IPOPT.
+"""Direct transcription on a theta-grid in b = theta_dot^2 and a = theta_ddot, IPOPT.
 
-Grid: N nodes theta_0 = 0 < ... < theta_{N-1} = 2 pi, N-1 intervals. b_k at the nodes is the
-decision variable; on interval k, b is linear, so theta_ddot = a_k = (b_{k+1} - b_k) / (2 dth_k)
-is constant (b' = 2 a), and the exact time on it is 2 dth_k / (sqrt(b_k) + sqrt(b_{k+1})).
+After Verscheure et al. (2009), with a second-order (trapezoidal) collocation of b' = 2 a.
+Grid: N nodes theta_0 = 0 < ... < theta_{N-1} = 2 pi, N-1 intervals of length h_k. b_k and a_k
+at the nodes are the decision variables; on interval k, theta_ddot is linear in theta and b
+quadratic, b(theta_k + s) = b_k + 2 a_k s + (a_{k+1} - a_k) s^2 / h_k, which closes exactly
+when b_{k+1} - b_k = (a_k + a_{k+1}) h_k (collocation rows). A first-order scheme (b linear,
+a constant per interval) leaves the torque no way to stay at 0 across an interval, so near
+the time-optimal duration its optimum chatters and N = 200 -> 1000 moved E by ~1 %; this one
+moves it by < 0.2 % (benchmarks/bench_timing.py).
 
     minimise     w_E E + w_T T
-    E = sum_k dth_k sum_i |y_ik|,  y_ik = tau_i(mid_k) Phi'_i(mid_k)        [J]
-    T = sum_k 2 dth_k / (sqrt b_k + sqrt b_{k+1})                         [s]
+    E = sum_k h_k / 6 sum_i (|y_i(theta_k)| + 4 |y_i(mid_k)| + |y_i(theta_k+1)|)   [J]
+        y_i = tau_i Phi'_i (power per unit theta, J/rad), Simpson's rule
+    T = the profile's time law (profile.TIME_SUBSTEPS pieces per interval)       [s]
     tau(theta) = m a + c b + g + tau_f(Phi' sqrt b)      (problem.PathDynamics)
     s.t.  T = T_req (fixed duration) or T free (time-energy trade-off, w_T = time weight)
-          delta^2 <= b_k <= beta_k  (theta_dot >= delta; joint speeds, also at midpoints)
-          |tau| <= tau_max at both ends of every interval (with that interval's a_k)
-          boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}
+          delta^2 <= b inside the path (nodes and pieces); b <= speed bound at nodes and
+          midpoints; |tau| <= tau_max at every node and midpoint
+          boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}, a_0 = a_{N-1}
 
-|y| is exact: epigraph variables e_ik >= +-y_ik with sum e minimised (no bias at the
-optimum), or, if ``abs_smoothing`` eps > 0, sqrt(y^2 + eps^2), whose bias is at most
-2 pi n eps [J]. The energy reported is always recomputed with the exact |y|.
+|y| is exact: epigraph variables e >= +-y with sum e minimised (no bias at the optimum), or,
+if ``abs_smoothing`` eps > 0, sqrt(y^2 + eps^2), whose bias is at most 2 pi n eps [J]. The
+energy reported is always recomputed with the exact |y|. The result is a quadratic
+``ThetaProfile`` (node accelerations included), sampled exactly by the evaluator.
 
 The NLP is built once per (path, grid, boundary, friction); duration, weights, delta and the
 limits are parameters or bounds, so a new request only re-solves (warm-started from the last
@@ -32,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
-from .profile import ThetaProfile
+from .profile import TIME_SUBSTEPS, ThetaProfile, quadratic_b
 
 BOUNDARY_REST = 'rest'
 BOUNDARY_PERIODIC = 'periodic'
@@ -91,67 +98,79 @@ class Transcription:
         dth = np.diff(nodes.theta)
         self.N, self.n = N, n
 
-        # --- decision variables ----------------------------------------------------------
+        # --- decision variables: b and a at the nodes, epigraph variables e -----------
         if boundary == BOUNDARY_REST:
             xb = ca.SX.sym('b', N - 2)
             b = ca.vertcat(0, xb, 0)                 # at rest at both ends
+            xa = ca.SX.sym('a', N)
+            a = xa
         else:
             xb = ca.SX.sym('b', N - 1)
             b = ca.vertcat(xb, xb[0])                # b_{N-1} = b_0
+            xa = ca.SX.sym('a', N - 1)
+            a = ca.vertcat(xa, xa[0])                # a_{N-1} = a_0
         use_epi = self.abs_smoothing <= 0
+        n_y = n * (N + K)                            # power samples: nodes, then midpoints
         # y = e_pos - e_neg with e_pos, e_neg >= 0: |y| = e_pos + e_neg at the optimum
-        e = ca.SX.sym('e', 2 * 3 * n * K) if use_epi else ca.SX.zeros(0)
-        x = ca.vertcat(xb, e)
+        e = ca.SX.sym('e', 2 * n_y) if use_epi else ca.SX.zeros(0)
+        x = ca.vertcat(xb, xa, e)
         p = ca.SX.sym('p', 2)                        # (w_E, w_T)
-        self._nb, self._ne = xb.numel(), e.numel()
+        self._nb, self._na, self._ne = xb.numel(), xa.numel(), e.numel()
+
+        # --- b on the time-law pieces and at the midpoints (affine in b, a) --------------
+        D = ca.DM(dth)
+        J = TIME_SUBSTEPS
+        b_sub = [quadratic_b(b[:-1], a[:-1], a[1:], D, D * (j / J)) for j in range(1, J)]
+        b_mid = b_sub[J // 2 - 1]
+        a_mid = 0.5 * (a[:-1] + a[1:])
+        safe_sqrt = lambda v: ca.sqrt(ca.fmax(v, 1e-12))  # noqa: E731  (rows may dip < 0)
+        sb = ca.sqrt(b)
+        pts = [sb[:-1]] + [safe_sqrt(bj) for bj in b_sub] + [sb[1:]]
+        duration = ca.sum1(sum(2 * D / J / (pts[j] + pts[j + 1]) for j in range(J)))
 
         # --- dynamics: torque along the path, affine in (a, b) apart from friction ------
-        sb = ca.sqrt(b)
-        a = (b[1:] - b[:-1]) / (2 * ca.DM(dth))
-        b_mid = 0.5 * (b[1:] + b[:-1])
         rep = lambda row: ca.repmat(ca.reshape(row, 1, -1), n, 1)  # noqa: E731
-        A = rep(a)
-        tau_f_nodes = friction(ca.DM(nodes.dq.T) * rep(sb))
-        tau_f_mid = friction(ca.DM(mids.dq.T) * rep(ca.sqrt(b_mid)))
-        m_n, c_n, g_n = ca.DM(nodes.m.T), ca.DM(nodes.c.T), ca.DM(nodes.g.T)
-        tau_mid = (ca.DM(mids.m.T) * A + ca.DM(mids.c.T) * rep(b_mid) + ca.DM(mids.g.T)
-                   + tau_f_mid)
-        rigid_start = m_n[:, :-1] * A + c_n[:, :-1] * rep(b[:-1]) + g_n[:, :-1]
-        rigid_end = m_n[:, 1:] * A + c_n[:, 1:] * rep(b[1:]) + g_n[:, 1:]
-        tau_start = rigid_start + tau_f_nodes[:, :-1]
-        tau_end = rigid_end + tau_f_nodes[:, 1:]
+        rigid_n = ca.DM(nodes.m.T) * rep(a) + ca.DM(nodes.c.T) * rep(b) + ca.DM(nodes.g.T)
+        rigid_m = (ca.DM(mids.m.T) * rep(a_mid) + ca.DM(mids.c.T) * rep(b_mid)
+                   + ca.DM(mids.g.T))
+        tau_n = rigid_n + friction(ca.DM(nodes.dq.T) * rep(sb))
+        tau_m = rigid_m + friction(ca.DM(mids.dq.T) * rep(safe_sqrt(b_mid)))
         # Where joint i reverses inside interval k (or starts/stops), friction sweeps through
-        # its breakaway value F0_i between the nodes: there |rigid torque| <= tau_max - F0.
+        # its breakaway value F0_i between the samples: there |rigid torque| <= tau_max - F0
+        # at both nodes and the midpoint of the interval.
         sgn_n, sgn_m = np.sign(nodes.dq.T), np.sign(mids.dq.T)
         rev = (sgn_n[:, :-1] != sgn_n[:, 1:]) | (sgn_m != sgn_n[:, :-1])
         if boundary == BOUNDARY_REST:            # starting from / stopping at v = 0
             rev[:, 0] = rev[:, -1] = True
-        rev = rev.ravel(order='F')
-        self._rev_idx = np.flatnonzero(rev)
-        self._rev_joint = self._rev_idx % n
+        joint, interval = np.nonzero(rev)
+        self._rev_joint = joint
         probe = ca.DM(np.array([[0.01, -0.01]] * n))
         self._breakaway = np.abs(np.asarray(friction(probe))).max(axis=1)
-        # power per unit theta [J/rad] at interval start, midpoint and end, (3 n K,)
-        y = ca.vertcat(ca.vec(tau_start * ca.DM(nodes.dq[:-1].T)),
-                       ca.vec(tau_mid * ca.DM(mids.dq.T)),
-                       ca.vec(tau_end * ca.DM(nodes.dq[1:].T)))
-        w = ca.vec(ca.DM(np.tile(dth, (n, 1)))) / 6   # Simpson weights dth/6 (1, 4, 1)
-        W = ca.vertcat(w, 4 * w, w)
+        flat = lambda i, k: (k * n + i).tolist()  # noqa: E731  (column-major vec index)
+        rev_rows = ca.vertcat(ca.vec(rigid_n)[flat(joint, interval)],
+                              ca.vec(rigid_m)[flat(joint, interval)],
+                              ca.vec(rigid_n)[flat(joint, interval + 1)])
+        # power per unit theta [J/rad] at the nodes and midpoints, (n (N + K),)
+        y = ca.vertcat(ca.vec(tau_n * ca.DM(nodes.dq.T)), ca.vec(tau_m * ca.DM(mids.dq.T)))
+        wn = np.zeros(N)
+        wn[:-1] += dth / 6
+        wn[1:] += dth / 6                          # Simpson weights dth/6 (1, 4, 1)
+        W = ca.vertcat(ca.vec(ca.DM(np.tile(wn, (n, 1)))),
+                       ca.vec(ca.DM(np.tile(4 * dth / 6, (n, 1)))))
 
         # --- objective -------------------------------------------------------------------
         energy_exact = ca.dot(W, ca.fabs(y))
         if use_epi:
-            e_pos, e_neg = e[:3 * n * K], e[3 * n * K:]
+            e_pos, e_neg = e[:n_y], e[n_y:]
             energy = ca.dot(W, e_pos + e_neg)
         else:
             energy = ca.dot(W, ca.sqrt(y ** 2 + self.abs_smoothing ** 2))
-        duration = ca.sum1(2 * ca.DM(dth) / (sb[:-1] + sb[1:]))
         f = p[0] * energy + p[1] * duration
 
         # --- path constraints (rows; bounds are set per solve) ---------------------------
-        ridx = self._rev_idx.tolist()
-        g_rows = [duration, b_mid, ca.vec(tau_start), ca.vec(tau_end),
-                  ca.vec(rigid_start)[ridx], ca.vec(rigid_end)[ridx]]
+        collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * D     # = 0 (b' = 2 a, exact)
+        g_rows = [duration, collocation, ca.vertcat(*b_sub), b_mid, ca.vec(tau_n),
+                  ca.vec(tau_m), rev_rows]
         if use_epi:
             g_rows += [y - e_pos + e_neg]            # = 0
         g = ca.vertcat(*g_rows)
@@ -164,15 +183,14 @@ class Transcription:
         # warm solver: capped iterations, then a cold solve takes over
         self._solver_warm = ca.nlpsol('transcription_warm', 'ipopt', nlp,
                                       ipopt_options(min(max_iter, 40), tol, warm=True))
-        self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_start),
-                                             ca.vec(tau_end), y])
-        self._b = ca.Function('b', [x], [b])
-        self._beta_nodes = None
+        self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
+                                             ca.vec(tau_m), y])
+        self._ba = ca.Function('ba', [x], [b, a])
         self.build_time = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------
     def _bounds(self, req: SolveRequest):
-        N, K = self.N, self.N - 1
+        N, K, n = self.N, self.N - 1, self.n
         beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
         beta_m = speed_bound(self.mids.dq, req.velocity_limit)
         lo = req.min_theta_dot ** 2
@@ -180,34 +198,47 @@ class Transcription:
             lbb, ubb = np.full(N - 2, lo), beta_n[1:-1]
         else:
             lbb, ubb = np.full(N - 1, lo), beta_n[:-1]
-        lbx = np.concatenate([lbb, np.zeros(self._ne)])
-        ubx = np.concatenate([ubb, np.full(self._ne, np.inf)])
+        lbx = np.concatenate([lbb, np.full(self._na, -np.inf), np.zeros(self._ne)])
+        ubx = np.concatenate([ubb, np.full(self._na, np.inf), np.full(self._ne, np.inf)])
         if req.duration > 0:
             lt, ut = req.duration, req.duration
         else:
             lt, ut = 0.0, np.inf
-        tau = np.repeat(np.asarray(req.torque_limit, float)[None, :], K, axis=0).ravel()
-        tau_rev = (np.asarray(req.torque_limit, float)[self._rev_joint]
-                   - self._breakaway[self._rev_joint])
-        lbg = [[lt], np.zeros(K), -tau, -tau, -tau_rev, -tau_rev]
-        ubg = [[ut], beta_m, tau, tau, tau_rev, tau_rev]
+        # b >= delta^2 inside the path; on a rest interval only >= 0
+        lo_sub = np.full(K, lo)
+        if self.boundary == BOUNDARY_REST:
+            lo_sub[0] = lo_sub[-1] = 0.0
+        n_sub = TIME_SUBSTEPS - 1
+        tau_lim = np.asarray(req.torque_limit, float)
+        tau_n, tau_m = np.tile(tau_lim, N), np.tile(tau_lim, K)
+        tau_rev = np.tile(tau_lim[self._rev_joint] - self._breakaway[self._rev_joint], 3)
+        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_sub), np.zeros(K), -tau_n, -tau_m,
+               -tau_rev]
+        ubg = [[ut], np.zeros(K), np.full(n_sub * K, np.inf), beta_m, tau_n, tau_m, tau_rev]
         if self._ne:
             lbg += [np.zeros(self._ne // 2)]
             ubg += [np.zeros(self._ne // 2)]
         return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
 
     def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
-        """b constant at the requested mean speed (clipped to the bounds), e = |y|."""
-        nb = self._nb
+        """b constant at the requested mean speed (clipped to the bounds), a from b, e = |y|."""
+        nb, na = self._nb, self._na
         if req.duration > 0:
             b0 = (2 * np.pi / req.duration) ** 2
         else:
             b0 = 0.25 * np.min(ubx[:nb])
         xb = np.clip(np.full(nb, b0), lbx[:nb], 0.95 * ubx[:nb])
-        x0 = np.concatenate([xb, np.zeros(self._ne)])
+        if self.boundary == BOUNDARY_REST:
+            b = np.concatenate([[0.0], xb, [0.0]])
+        else:
+            b = np.append(xb, xb[0])
+        # node a consistent with b on average (the collocation rows are met by the solver)
+        a_int = np.diff(b) / (2 * np.diff(self.nodes.theta))
+        a = np.concatenate([a_int[:1], 0.5 * (a_int[:-1] + a_int[1:]), a_int[-1:]])[:na]
+        x0 = np.concatenate([xb, a, np.zeros(self._ne)])
         if self._ne:
             y = np.asarray(self._aux(x0)[4]).ravel()
-            x0[nb:] = np.concatenate([np.maximum(y, 0), np.maximum(-y, 0)]) + 1e-3
+            x0[nb + na:] = np.concatenate([np.maximum(y, 0), np.maximum(-y, 0)]) + 1e-3
         return x0
 
     def _close_to_last(self, req: SolveRequest) -> bool:
@@ -254,17 +285,18 @@ class Transcription:
             if ok:
                 self._last = (x, np.asarray(sol['lam_x']).ravel(),
                               np.asarray(sol['lam_g']).ravel(), req)
-        energy, duration, tau_s, tau_e, _ = (np.asarray(v).ravel() for v in self._aux(x))
-        b = np.maximum(np.asarray(self._b(x)).ravel(), 0.0)
+        energy, duration, tau_n, tau_m, _ = (np.asarray(v).ravel() for v in self._aux(x))
+        b, a = (np.asarray(v).ravel() for v in self._ba(x))
+        b = np.maximum(b, 0.0)
         if self.boundary == BOUNDARY_REST:
             b[0] = b[-1] = 0.0
-        peak = np.maximum(np.abs(tau_s).reshape(-1, self.n).max(axis=0),
-                          np.abs(tau_e).reshape(-1, self.n).max(axis=0))
+        peak = np.maximum(np.abs(tau_n).reshape(-1, self.n).max(axis=0),
+                          np.abs(tau_m).reshape(-1, self.n).max(axis=0))
         stats_out = SolveStats(str(stats['return_status']), ok, int(iters), elapsed)
         try:
-            profile = ThetaProfile(self.nodes.theta, np.sqrt(b))
-        except ValueError:
+            profile = ThetaProfile(self.nodes.theta, np.sqrt(b), a)
+        except ValueError as exc:
             profile = None
-            stats_out = SolveStats('invalid profile', False, int(iters), elapsed)
+            stats_out = SolveStats(f'invalid profile: {exc}', False, int(iters), elapsed)
         return TranscriptionResult(profile, float(energy[0]), float(duration[0]), peak,
                                    stats_out)

@@ -29,6 +29,43 @@ def test_sampling_is_exact_for_constant_acceleration():
     assert_allclose(thdd, 1.0, atol=1e-12)
 
 
+def test_quadratic_profile_with_constant_acceleration_equals_the_linear_one():
+    theta = np.linspace(0, 2 * np.pi, 9)
+    lin = ThetaProfile(theta, np.sqrt(2 * theta))            # a = 1 everywhere
+    quad = ThetaProfile(theta, np.sqrt(2 * theta), np.ones(9))
+    assert quad.quadratic and not lin.quadratic
+    assert_allclose(quad.duration, lin.duration, rtol=1e-12)
+    t = np.linspace(0, lin.duration, 40)
+    for a, b in zip(quad.sample(t), lin.sample(t)):
+        assert_allclose(a, b, atol=1e-12)
+
+
+def test_quadratic_profile_follows_linear_theta_ddot():
+    # theta_ddot = 1 + theta / 2 from theta_dot = 1: b = 1 + 2 theta + theta^2 / 2 (exact
+    # quadratic); time law against the exact integral of dtheta / sqrt(b)
+    theta = np.linspace(0, 2 * np.pi, 21)
+    b = 1 + 2 * theta + theta ** 2 / 2
+    pr = ThetaProfile(theta, np.sqrt(b), 1 + theta / 2)
+    fine = np.linspace(0, 2 * np.pi, 200001)
+    t_exact = np.trapezoid(1 / np.sqrt(1 + 2 * fine + fine ** 2 / 2), fine)
+    assert_allclose(pr.duration, t_exact, rtol=1e-4)
+    th, thd, thdd = pr.sample(np.linspace(0, pr.duration, 30))
+    assert_allclose(thd, np.sqrt(1 + 2 * th + th ** 2 / 2), rtol=1e-12)
+    assert_allclose(thdd, 1 + th / 2, rtol=1e-12)
+    assert_allclose(pr.theta_ddot_nodes, 1 + theta / 2)
+    slow = pr.scaled_in_time(2.0)
+    assert_allclose(slow.duration, 2 * pr.duration, rtol=1e-12)
+    assert_allclose(slow.theta_ddot_nodes, pr.theta_ddot_nodes / 4)
+
+
+def test_quadratic_profile_rejects_inconsistent_accelerations():
+    theta = np.linspace(0, 2 * np.pi, 9)
+    with pytest.raises(ValueError, match='inconsistent'):
+        ThetaProfile(theta, np.full(9, 2.0), np.full(9, 0.5))
+    with pytest.raises(ValueError):
+        ThetaProfile(theta, np.full(9, 2.0), np.zeros(8))
+
+
 def test_profile_rejects_bad_input():
     with pytest.raises(ValueError):
         ThetaProfile(np.array([0.0, 1.0]), np.array([0.0, 0.0]))
