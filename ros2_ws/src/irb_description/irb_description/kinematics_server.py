@@ -52,13 +52,15 @@ def _descriptor(text: str):
 
 def main(args=None):
     rclpy.init(args=args)
-    node = KinematicsServer()
-    try:
+    node = None
+    try:                       # Ctrl-C while the node is built must not print a traceback
+        node = KinematicsServer()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        node.destroy_node()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
 
 

@@ -94,6 +94,9 @@ def main(args=None):
         print(f'replay: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
+    except (KeyboardInterrupt, ExternalShutdownException):   # Ctrl-C while opening the bag
+        rclpy.try_shutdown()
+        return 0
     player = threading.Thread(target=node.run, daemon=True)
     player.start()
     try:
