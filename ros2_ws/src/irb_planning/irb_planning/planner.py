@@ -42,7 +42,7 @@ class PlannerSettings:
     friction_smoothing_rad_s: float = 1e-3   # tanh(v / eps) for sign(v) in the NLP
     abs_smoothing_j_rad: float = 0.0     # 0: exact |.| (split); > 0: sqrt(y^2 + eps^2)
     constraint_margin: float = 0.005     # fraction of every limit kept free in the NLP
-    max_iterations: int = 500
+    max_iterations: int = 1000
     tolerance: float = 1e-8
     warm_start: bool = True
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
