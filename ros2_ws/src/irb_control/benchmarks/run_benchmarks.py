@@ -41,7 +41,33 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def bench_loop(duration: float = 20.0) -> dict:
+def _fifo_permitted() -> bool:
+    """Can this process's children use SCHED_FIFO? (tried on a short-lived child)"""
+    try:
+        return subprocess.run(['chrt', '-f', '1', 'true'], capture_output=True,
+                              timeout=10).returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
+def bench_loop(duration: float = 20.0, rt_priority: int = 20) -> dict:
+    """Two runs: default scheduling, then ``realtime_priority:=rt_priority`` on simulator
+    and pdplus (skipped, with the reason, when SCHED_FIFO is not permitted or rt_priority is
+    0). The default run's figures are at the top level of loop.json, the other's under
+    'realtime_priority_run'."""
+    out = _loop_run(duration, 0)
+    if rt_priority and _fifo_permitted():
+        out['realtime_priority_run'] = _loop_run(duration, rt_priority)
+    else:
+        out['realtime_priority_run'] = {'skipped': 'rt_priority 0' if not rt_priority else
+                                        'SCHED_FIFO not permitted here (chrt -f 1 failed)'}
+    rt = out['realtime_priority_run']
+    out['goal_met_with_realtime_priority'] = rt.get('goal_met')
+    _write('loop', out)
+    return out
+
+
+def _loop_run(duration: float, rt_priority: int) -> dict:
     import rclpy
     from irb_interfaces.msg import ControllerState
 
@@ -49,19 +75,24 @@ def bench_loop(duration: float = 20.0) -> dict:
     ns = f'/bench{os.getpid()}'
     stats_path = RESULTS / 'loop_simulator_stats.json'
     RESULTS.mkdir(parents=True, exist_ok=True)
-    common = ['--ros-args', '-r', f'__ns:={ns}']
+    common = ['--ros-args', '-r', f'__ns:={ns}', '-p', f'realtime_priority:={rt_priority}']
+    # the nodes' output goes to files (a pipe nobody reads could fill and block a node)
+    tag = f'_rt{rt_priority}' if rt_priority else ''
+    logs = {n: open(RESULTS / f'loop_{n}{tag}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
                              '-p', 'profile_duration_s:=10.0'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
                             '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}'],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                           stdout=logs['simulator'], stderr=subprocess.STDOUT, text=True)
     rclpy.init()
     node = rclpy.create_node('bench_listener')
     states = []
+    # the listener is an observer on the same 2 cores: it keeps the serialized messages (no
+    # message objects while the loop runs) and decodes them afterwards; the light
+    # EventsExecutor
     node.create_subscription(ControllerState, f'{ns}/controller_state', states.append,
-                             state_qos())
-    # the listener is an observer on the same 2 cores: the light EventsExecutor
+                             state_qos(), raw=True)
     ex = make_executor('events')
     ex.add_node(node)
     t_end = time.monotonic() + 60.0
@@ -79,15 +110,20 @@ def bench_loop(duration: float = 20.0) -> dict:
     for p in (sim, ctrl):           # simulator first: its statistics end while pdplus runs
         p.send_signal(signal.SIGINT)
         p.wait(timeout=30)
+    for f in logs.values():
+        f.close()
     ex.shutdown()
     node.destroy_node()
     rclpy.try_shutdown()
     sim_stats = json.loads(stats_path.read_text())
+    from rclpy.serialization import deserialize_message
+    states = [deserialize_message(b, ControllerState) for b in states]
     dur = np.array([s.step_duration for s in states[n0:]]) * 1e3
     modes = [int(s.mode) for s in states[n0:]]
     expected_steps = wall / 0.004032
     out = {
         'benchmark': 'loop timing, simulator <-> pdplus, 2 processes, real time 248 Hz',
+        'realtime_priority': rt_priority,
         'listen_wall_s': round(wall, 2),
         'state_to_command_latency_ms (simulator side)': sim_stats['latency_ms'],
         'missed_deadlines (command not back before next tick)': sim_stats['missed_deadlines'],
@@ -107,7 +143,7 @@ def bench_loop(duration: float = 20.0) -> dict:
     lat = sim_stats['latency_ms']
     out['goal_met'] = bool(lat and lat['p99'] < 1.0 and out['missed_fraction'] < 0.001
                            and out['max_consecutive_missed'] < 3)
-    _write('loop', out)
+    out['load_average_1_5_15_min_at_end'] = [round(x, 2) for x in os.getloadavg()]
     return out
 
 
@@ -292,6 +328,8 @@ def main(argv=None):
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('which', choices=['loop', 'accuracy', 'speed', 'all'])
     ap.add_argument('--loop-seconds', type=float, default=20.0)
+    ap.add_argument('--loop-rt-priority', type=int, default=20,
+                    help='realtime_priority of the second loop run (0: no second run)')
     ap.add_argument('--no-plots', action='store_true')
     a = ap.parse_args(argv)
     if a.which in ('speed', 'all'):
@@ -299,7 +337,7 @@ def main(argv=None):
     if a.which in ('accuracy', 'all'):
         bench_accuracy(not a.no_plots)
     if a.which in ('loop', 'all'):
-        bench_loop(a.loop_seconds)
+        bench_loop(a.loop_seconds, a.loop_rt_priority)
 
 
 if __name__ == '__main__':

@@ -20,7 +20,7 @@ from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES
-from .node_util import declare, run_node, spin_with, state_qos
+from .node_util import declare, declare_realtime, run_node, spin_with, state_qos
 
 
 class AxisBridge(Node):
@@ -43,6 +43,7 @@ class AxisBridge(Node):
                                 'period of /axis_bridge/status [s]')
         self.executor_kind = declare(self, 'executor', 'events',
                                      "'events' (rclpy EventsExecutor, faster) or 'single'")
+        self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
         self.core = BridgeCore(link_timeout, max_age)
         self.joint_names = RobotModel.load().joint_names
         self.lock = threading.Lock()
@@ -148,7 +149,7 @@ class AxisBridge(Node):
 
 
 def main(args=None):
-    run_node(AxisBridge, lambda node: spin_with(node.executor_kind)(node), args)
+    run_node(AxisBridge, lambda node: spin_with(node.executor_kind, node.realtime)(node), args)
 
 
 if __name__ == '__main__':

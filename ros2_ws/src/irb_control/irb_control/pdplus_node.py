@@ -5,6 +5,7 @@ message each per sample. Profile from /planned_trajectory (latched) or the built
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -17,8 +18,10 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import declare, latched_qos, run_node, spin_with, state_qos
+from .node_util import (declare, declare_realtime, latched_qos, run_node, spin_with,
+                        state_qos)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
                       ControllerConfig, PdPlusController, Watchdog)
 from .profiles import ProfileError, default_circle_profile, sine_trajectory
@@ -71,6 +74,7 @@ class PdPlusNode(Node):
             '(lockstep) [s]')
         par('deadline_s', 0.002, 'a step slower than this counts as a missed deadline [s]')
         par('executor', 'events', "'events' (EventsExecutor, spin_once loop) or 'single'")
+        self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
         self.P = P
         self.model = RobotModel.load()
         self.path = CirclePath(np.array(P['path_center'], float), P['path_radius'],
@@ -98,17 +102,21 @@ class PdPlusNode(Node):
         self._last_stamp: float | None = None
         self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_qos())
         self.pub_state = self.create_publisher(ControllerState, 'controller_state', state_qos())
-        self.create_subscription(JointState, 'joint_states', self.on_state, state_qos())
+        self.create_subscription(JointState, 'joint_states', self.on_state_raw, state_qos(),
+                                 raw=True)
         self.create_subscription(JointTrajectory, 'planned_trajectory', self.on_plan,
                                  latched_qos())
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
         self.create_timer(cfg.period_s, self.on_watchdog, clock=self.steady)
-        self._cmd = JointState(name=self.model.joint_names)
         self._names = list(self.model.joint_names)
-        self._name_key: list | None = None      # msg.name of the last joint state ...
-        self._name_idx: list | None = None      # ... and the indices of joints 1-3 in it
-        self._st = ControllerState()
+        self._name_key: tuple | None = None     # names of the last joint state ...
+        self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
+        # the loop topics travel serialized (cdr.py): no message objects in the hot path
+        self._decoder = JointStateDecoder()
+        self._cmd_enc = JointStateEncoder(self._names, 0, 0, 3)
+        self._state_enc = ControllerStateEncoder()
+        self._deadline_s = float(P['deadline_s'])
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
             f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")
@@ -140,18 +148,31 @@ class PdPlusNode(Node):
             self.ctrl.enable()
 
     # --- callbacks -----------------------------------------------------------------------
-    def on_state(self, msg: JointState) -> None:
-        # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
+    def on_state_raw(self, data: bytes) -> None:
+        """/joint_states as serialized bytes (the subscription is raw: no message object)."""
         t_in = time.perf_counter()
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        q, qd = self._by_name(msg)
+        try:
+            sec, nanosec, names, position, velocity, _ = self._decoder.decode(data)
+        except ValueError as exc:
+            self.ctrl.step(math.nan, _NAN3, _NAN3)      # counted as a rejected input
+            self.get_logger().warn(f'joint_states refused: {exc}', throttle_duration_sec=1.0)
+            return
+        q, qd = self._select(names, position, velocity)
+        self._on_sample(t_in, sec, nanosec, q, qd)
+
+    def on_state(self, msg: JointState) -> None:
+        """The same for a JointState message object."""
+        t_in = time.perf_counter()
+        q, qd = self._select(tuple(msg.name), msg.position, msg.velocity)
+        self._on_sample(t_in, msg.header.stamp.sec, msg.header.stamp.nanosec, q, qd)
+
+    def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
+        # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
+        stamp = sec + nanosec * 1e-9
         was = self.ctrl.mode
         out = self.ctrl.step(stamp, q, qd)
         if out.publish:
-            c = self._cmd
-            c.header.stamp = msg.header.stamp
-            c.effort = out.tau.tolist()
-            self.pub_cmd.publish(c)
+            self.pub_cmd.publish(self._cmd_enc.encode(sec, nanosec, (), (), out.tau.tolist()))
         if not out.rejected_input:
             # steady clock: time.monotonic() is CLOCK_MONOTONIC, as ROS's STEADY_TIME
             self.watchdog.feed(time.monotonic())
@@ -160,7 +181,7 @@ class PdPlusNode(Node):
             self.missed += int(round((stamp - self._last_stamp) / T)) - 1
         self._last_stamp = stamp
         dt = time.perf_counter() - t_in
-        if dt > self.P['deadline_s']:
+        if dt > self._deadline_s:
             self.missed += 1
         if out.mode != was:
             # one call site per severity: rclpy refuses a severity change at the same site
@@ -170,21 +191,13 @@ class PdPlusNode(Node):
                 self.get_logger().error(text)
             else:
                 self.get_logger().info(text)
-        s = self._st
-        s.header.stamp = msg.header.stamp
-        s.mode = out.mode
-        s.stop_reason = out.stop_reason
-        s.theta, s.theta_predicted, s.theta_dot_ref = (
-            float(out.theta), float(out.theta_predicted), float(out.theta_dot_ref))
-        s.q_ref, s.qd_ref, s.qdd_ref = (out.q_ref.tolist(), out.qd_ref.tolist(),
-                                        out.qdd_ref.tolist())
-        s.q_error, s.qd_error = out.q_error.tolist(), out.qd_error.tolist()
-        s.tau_model, s.tau_friction = out.tau_model.tolist(), out.tau_friction.tolist()
-        s.tau_feedback, s.tau_command = out.tau_feedback.tolist(), out.tau.tolist()
-        s.missed_deadlines = self.missed
-        s.rejected_inputs = self.ctrl.rejected_inputs
-        s.step_duration = dt
-        self.pub_state.publish(s)
+        self.pub_state.publish(self._state_enc.encode(
+            sec, nanosec, out.mode, out.stop_reason, float(out.theta),
+            float(out.theta_predicted), float(out.theta_dot_ref),
+            (out.q_ref.tolist(), out.qd_ref.tolist(), out.qdd_ref.tolist(),
+             out.q_error.tolist(), out.qd_error.tolist(), out.tau_model.tolist(),
+             out.tau_friction.tolist(), out.tau_feedback.tolist(), out.tau.tolist()),
+            self.missed, self.ctrl.rejected_inputs, dt))
 
     def on_watchdog(self) -> None:
         if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):
@@ -236,40 +249,41 @@ class PdPlusNode(Node):
         self.get_logger().warn('stop service: safe stop latched')
         return response
 
+    def _select(self, names: tuple, position, velocity):
+        """q, qd of joints 1-3 by name (the index lookup cached while the names repeat);
+        by position when the message has no names; NaN (-> rejected) when a joint is
+        missing."""
+        if names is not self._name_key and names != self._name_key:
+            self._name_key = names
+            self._name_idx = _joint_indices(names, self._names)
+        idx = self._name_idx
+        if idx is None:
+            return _NAN3, _NAN3
+        i, j, k = idx
+        try:
+            return (position[i], position[j], position[k]), (velocity[i], velocity[j],
+                                                             velocity[k])
+        except IndexError:
+            return _NAN3, _NAN3
 
-    def _by_name(self, msg: JointState):
-        """``_by_name(msg, joint names)`` with the index lookup cached for repeated names."""
-        name = msg.name
-        if name and name == self._name_key:
-            idx = self._name_idx
-            try:
-                p, v = msg.position, msg.velocity
-                return (np.array([p[idx[0]], p[idx[1]], p[idx[2]]], float),
-                        np.array([v[idx[0]], v[idx[1]], v[idx[2]]], float))
-            except IndexError:
-                return np.full(3, np.nan), np.full(3, np.nan)
-        out = _by_name(msg, self._names)
-        if name and all(n in name for n in self._names):
-            self._name_key = list(name)
-            self._name_idx = [self._name_key.index(n) for n in self._names]
-        return out
+
+_NAN3 = (math.nan, math.nan, math.nan)
 
 
-def _by_name(msg: JointState, names: list[str]):
-    """q, qd (3,) in joint order; arrays of NaN when the message lacks a joint."""
+def _joint_indices(names: tuple, joints: list[str]) -> tuple | None:
+    """Indices of ``joints`` in ``names`` (0, 1, 2 when ``names`` is empty), None if one is
+    missing."""
+    if not names:
+        return tuple(range(len(joints)))
     try:
-        if msg.name:
-            idx = [list(msg.name).index(n) for n in names]
-        else:
-            idx = list(range(len(names)))
-        return (np.array([msg.position[i] for i in idx], float),
-                np.array([msg.velocity[i] for i in idx], float))
-    except (ValueError, IndexError):
-        return np.full(3, np.nan), np.full(3, np.nan)
+        return tuple(names.index(n) for n in joints)
+    except ValueError:
+        return None
 
 
 def main(args=None):
-    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'])(node), args)
+    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
+             args)
 
 
 if __name__ == '__main__':

@@ -20,7 +20,9 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from .node_util import declare, make_executor, run_node, state_qos
+from .cdr import JointStateDecoder, JointStateEncoder
+from .node_util import (apply_realtime, declare, declare_realtime, make_executor, run_node,
+                        state_qos)
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
 from .plant_effects import load_plant_effects
 
@@ -74,6 +76,7 @@ class SimulatorNode(Node):
             'executor': declare(self, 'executor', 'events',
                                 "'events' (EventsExecutor, lower latency) or 'single'"),
         }
+        self.realtime = declare_realtime(self)       # (priority, cpus), applied by _spin
         self.p = p
         if p['mode'] not in ('realtime', 'lockstep'):
             raise ValueError(f"mode must be 'realtime' or 'lockstep', not {p['mode']!r}")
@@ -97,9 +100,12 @@ class SimulatorNode(Node):
                                              QoSProfile(depth=50))
         self.pub_clock = (self.create_publisher(Clock, '/clock', qos_profile_sensor_data)
                           if self.lockstep else None)
-        self.create_subscription(JointState, 'torque_command', self.on_command, state_qos())
-        self._state_msg = JointState(name=self.joint_names)     # reused every sample
-        self._effort_names: list | None = None   # msg.name of the last command ...
+        self.create_subscription(JointState, 'torque_command', self.on_command_raw,
+                                 state_qos(), raw=True)
+        # the loop topics travel serialized (cdr.py): no message objects in the hot path
+        self._state_enc = JointStateEncoder(self.joint_names, 3, 3, 3)
+        self._decoder = JointStateDecoder()
+        self._effort_names: tuple | None = None  # names of the last command ...
         self._effort_idx: list | None = None     # ... and the indices of joints 1-3 in it
         # loop statistics: state publish time per stamp, latency of the matching command
         self._sent: dict[int, float] = {}
@@ -116,44 +122,55 @@ class SimulatorNode(Node):
             f"{effects.names() or 'none'}")
 
     # --- command -------------------------------------------------------------------------
-    def on_command(self, msg: JointState) -> None:
+    def on_command_raw(self, data: bytes) -> None:
+        """/torque_command as serialized bytes (the subscription is raw: no message object)."""
         now = time.monotonic()
-        tau = self._effort(msg)
+        try:
+            sec, nanosec, names, _, _, effort = self._decoder.decode(data)
+        except ValueError as exc:
+            self.get_logger().warn(f'torque_command refused: {exc}', throttle_duration_sec=1.0)
+            return
+        self._apply_command(now, sec, nanosec, names, effort)
+
+    def on_command(self, msg: JointState) -> None:
+        """The same for a JointState message object."""
+        now = time.monotonic()
+        self._apply_command(now, msg.header.stamp.sec, msg.header.stamp.nanosec,
+                            tuple(msg.name), msg.effort)
+
+    def _apply_command(self, now: float, sec: int, nanosec: int, names: tuple, effort) -> None:
+        tau = self._effort(names, effort)
         if tau is None:
             self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
                                    throttle_duration_sec=1.0)
             return
         self.plant.command(tau)
-        key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        t_sent = self._sent.pop(key, None)
+        t_sent = self._sent.pop(sec * 1_000_000_000 + nanosec, None)
         if t_sent is not None:
             self.latencies.append(now - t_sent)
             self._answered_k = self._k
 
-    def _effort(self, msg: JointState) -> np.ndarray | None:
+    def _effort(self, names: tuple, effort) -> np.ndarray | None:
         """``_effort_by_name`` with the index lookup cached for repeated joint names."""
-        name, effort = msg.name, msg.effort
-        if name and name == self._effort_names and len(effort) == len(name):
+        if names and len(effort) == len(names) and (names is self._effort_names
+                                                    or names == self._effort_names):
             i = self._effort_idx
-            return np.array([effort[i[0]], effort[i[1]], effort[i[2]]], float)
-        tau = _effort_by_name(msg, self.joint_names)
-        if tau is not None and name and len(name) == len(effort):
-            idx = {n: i for i, n in enumerate(name)}
-            self._effort_names = list(name)
+            return np.array((effort[i[0]], effort[i[1]], effort[i[2]]), float)
+        tau = _effort_by_name(names, effort, self.joint_names)
+        if tau is not None and names and len(names) == len(effort):
+            idx = {n: i for i, n in enumerate(names)}
+            self._effort_names = names
             self._effort_idx = [idx[n] for n in self.joint_names]
         return tau
 
     # --- loop ----------------------------------------------------------------------------
     def _publish_state(self, stamp: Time) -> None:
         y = self.plant.measure()
-        msg = self._state_msg
-        msg.header.stamp = stamp
-        msg.position = y.q.tolist()
-        msg.velocity = y.qd.tolist()
-        msg.effort = y.tau.tolist()
-        key = stamp.sec * 1_000_000_000 + stamp.nanosec
+        sec, nanosec = stamp.sec, stamp.nanosec
+        data = self._state_enc.encode(sec, nanosec, y.q.tolist(), y.qd.tolist(), y.tau.tolist())
+        key = sec * 1_000_000_000 + nanosec
         self._sent = {key: time.monotonic()}      # only the latest state can be answered
-        self.pub_state.publish(msg)
+        self.pub_state.publish(data)
 
     def _after_step(self, stamp_of) -> None:
         for t, text in self.plant.events:
@@ -229,20 +246,23 @@ class SimulatorNode(Node):
                 'energy_j': self.plant.state.energy}
 
 
-def _effort_by_name(msg: JointState, names: list[str]) -> np.ndarray | None:
-    if len(msg.effort) < len(names):
+def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:
+    """Efforts of ``names`` by name (when the message names each effort), else the first
+    ones; None when too few or a joint is missing."""
+    if len(effort) < len(names):
         return None
-    if msg.name and len(msg.name) == len(msg.effort):
-        idx = {n: i for i, n in enumerate(msg.name)}
+    if msg_names and len(msg_names) == len(effort):
+        idx = {n: i for i, n in enumerate(msg_names)}
         if not all(n in idx for n in names):
             return None
-        return np.array([msg.effort[idx[n]] for n in names], float)
-    return np.array(msg.effort[:len(names)], float)
+        return np.array([effort[idx[n]] for n in names], float)
+    return np.array(effort[:len(names)], float)
 
 
 def _spin(node: SimulatorNode) -> None:
     executor = make_executor(node.p['executor'])
     executor.add_node(node)
+    apply_realtime(*node.realtime, logger=node.get_logger())
     try:
         node.run(executor)
     finally:

@@ -149,3 +149,86 @@ def test_theta_profile_from_planned_trajectory(graph):
     prof = ctrl.ctrl.profile
     assert prof.t[-1] == pytest.approx(15.0, abs=0.1)
     assert np.max(prof.theta_dot) == pytest.approx(np.max(thd), rel=1e-3)
+
+
+class _Capture:
+    """Stands in for a publisher: keeps what is published."""
+
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, msg):
+        self.sent.append(msg)
+
+
+def test_hot_path_commands_identical_to_the_controller(graph):
+    """The serialized path (raw subscription, bytes out) sends exactly the torques of
+    PdPlusController.step for the same measurements, through ramp and path, and the
+    message-object path the same bytes; other joint orders give the same command."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from irb_control.closed_loop import build_default
+    from irb_control.pd_plus import PdPlusController
+    ctrl, _, _, _ = graph
+    ref = PdPlusController(ctrl.model, ctrl.path, ctrl.ctrl.config, ctrl.ctrl.friction)
+    ref.set_path_profile(ctrl.ctrl.profile)
+    ref.enable()
+    plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
+    ctrl.pub_cmd, ctrl.pub_state = _Capture(), _Capture()
+    modes = set()
+    order = [2, 0, 1]
+    for k in range(400):
+        y = plant.measure()
+        t = 50.0 + k * T
+        msg = joint_state(t, y.q.tolist(), y.qd.tolist())
+        out = ref.step(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, y.q, y.qd)
+        modes.add(out.mode)
+        n = len(ctrl.pub_cmd.sent)
+        if k % 3 == 0:
+            ctrl.on_state_raw(serialize_message(msg))
+        elif k % 3 == 1:
+            ctrl.on_state(msg)
+        else:       # same joints, other order in the message
+            perm = joint_state(t, y.q[order].tolist(), y.qd[order].tolist())
+            perm.name = [msg.name[i] for i in order]
+            ctrl.on_state_raw(serialize_message(perm))
+        assert out.publish and len(ctrl.pub_cmd.sent) == n + 1
+        cmd = deserialize_message(ctrl.pub_cmd.sent[-1], JointState)
+        assert cmd.effort.tolist() == out.tau.tolist()                  # to the bit
+        assert list(cmd.name) == ['joint_1', 'joint_2', 'joint_3']
+        assert cmd.header.stamp == msg.header.stamp
+        st = deserialize_message(ctrl.pub_state.sent[-1], ControllerState)
+        assert st.mode == out.mode and st.tau_command.tolist() == out.tau.tolist()
+        np.testing.assert_array_equal(st.q_ref, out.q_ref)             # NaN == NaN here
+        np.testing.assert_array_equal([st.theta, st.theta_predicted, st.step_duration > 0],
+                                      [out.theta, out.theta_predicted, True])
+        plant.command(out.tau)
+        plant.step()
+    assert {ControllerState.MODE_RAMP, ControllerState.MODE_PATH} <= modes
+    # malformed bytes and a missing joint: refused, counted, no command
+    n, r = len(ctrl.pub_cmd.sent), ctrl.ctrl.rejected_inputs
+    ctrl.on_state_raw(b'\x00\x01\x00\x00\x01')
+    bad = joint_state(60.0, [0.1, 0.2])
+    bad.name = ['joint_1', 'joint_2']
+    ctrl.on_state_raw(serialize_message(bad))
+    assert len(ctrl.pub_cmd.sent) == n and ctrl.ctrl.rejected_inputs == r + 2
+
+
+def test_realtime_parameters_validated():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    try:
+        node = PdPlusNode(context=ctx, parameter_overrides=[
+            Parameter('realtime_priority', value=30), Parameter('cpu_affinity', value=[0])])
+        assert node.realtime == (30, [0])      # applied by main() to the process, not here
+        node.destroy_node()
+        node = PdPlusNode(context=ctx)
+        assert node.realtime == (0, [])
+        node.destroy_node()
+        for bad in (Parameter('realtime_priority', value=100),
+                    Parameter('realtime_priority', value=-1),
+                    Parameter('cpu_affinity', value=[-1])):
+            with pytest.raises(ValueError):
+                PdPlusNode(context=ctx, parameter_overrides=[bad])
+    finally:
+        rclpy.try_shutdown(context=ctx)

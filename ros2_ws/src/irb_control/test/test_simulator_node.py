@@ -1,0 +1,61 @@
+"""simulator node in-process: the serialized state and command paths (no DDS traffic)."""
+import os
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from irb_control.simulator_node import SimulatorNode, _stamp  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+class _Capture:
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, msg):
+        self.sent.append(msg)
+
+
+@pytest.fixture
+def sim():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    node = SimulatorNode(context=ctx)
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+def test_state_bytes_and_commands_by_name(sim):
+    sim.pub_state = _Capture()
+    measured = []
+    measure = sim.plant.measure
+    sim.plant.measure = lambda: measured.append(measure()) or measured[-1]
+    stamp = _stamp(12.5)
+    sim._publish_state(stamp)
+    m = deserialize_message(sim.pub_state.sent[-1], JointState)
+    y = measured[-1]
+    assert m.header.stamp == stamp and list(m.name) == ['joint_1', 'joint_2', 'joint_3']
+    assert m.position.tolist() == y.q.tolist() and m.velocity.tolist() == y.qd.tolist()
+    assert m.effort.tolist() == y.tau.tolist()
+
+    applied = []
+    sim.plant.command = lambda tau: applied.append(np.asarray(tau).tolist())
+    cmd = JointState(name=['joint_3', 'joint_1', 'joint_2'], effort=[3.0, 1.0, 2.0])
+    cmd.header.stamp = stamp
+    sim.on_command_raw(serialize_message(cmd))
+    assert applied[-1] == [1.0, 2.0, 3.0] and len(sim.latencies) == 1
+    sim.on_command(cmd)                                      # message-object path: the same
+    assert applied[-1] == [1.0, 2.0, 3.0]
+    unnamed = JointState(effort=[4.0, 5.0, 6.0, 7.0])
+    sim.on_command_raw(serialize_message(unnamed))
+    assert applied[-1] == [4.0, 5.0, 6.0]                   # no names: the first three
+    n = len(applied)
+    sim.on_command_raw(serialize_message(JointState(name=['joint_1'], effort=[1.0])))
+    sim.on_command_raw(b'\x00\x01\x00')
+    assert len(applied) == n                                  # refused, nothing applied
