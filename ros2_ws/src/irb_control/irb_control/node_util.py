@@ -1,14 +1,12 @@
 """Small helpers shared by the node files (parameters with descriptions, QoS)."""
 from __future__ import annotations
 
-import gc
 import os
 import signal
 import threading
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -134,28 +132,6 @@ def spin_until_signal(executor, timeout_sec: float = 0.1) -> None:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
-
-
-def run_node(make_node, spin, args=None) -> None:
-    """The Jazzy main idiom, robust to Ctrl-C at any moment, also while the node is built.
-
-    ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor).
-    """
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = make_node()
-        # everything built so far lives as long as the node: out of the collector's way, so
-        # that a full collection in the 248 Hz loop does not walk it (a few ms otherwise)
-        gc.collect()
-        gc.freeze()
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
 
 
 def spin_with(executor_kind: str, realtime: tuple[int, list[int]] = (0, [])):

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import rclpy
 from irb_interfaces.srv import SolveIk
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from .model import RobotModel, UnreachableError
+from .node_main import run_node
 
 
 class KinematicsServer(Node):
@@ -51,17 +51,7 @@ def _descriptor(text: str):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:                       # Ctrl-C while the node is built must not print a traceback
-        node = KinematicsServer()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(KinematicsServer, rclpy.spin, args)
 
 
 if __name__ == '__main__':

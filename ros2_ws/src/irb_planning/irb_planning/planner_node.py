@@ -10,12 +10,12 @@ from __future__ import annotations
 import dataclasses
 import traceback
 
-import rclpy
+from irb_description.node_main import run_node
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
@@ -95,20 +95,14 @@ class PlannerNode(Node):
         return response
 
 
+def _spin(node: PlannerNode) -> None:
+    executor = MultiThreadedExecutor(num_threads=2)
+    executor.add_node(node)
+    executor.spin()
+
+
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:                       # Ctrl-C while the node is built must not print a traceback
-        node = PlannerNode()
-        executor = MultiThreadedExecutor(num_threads=2)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PlannerNode, _spin, args)
 
 
 if __name__ == '__main__':
