@@ -48,7 +48,7 @@ import casadi as ca
 import numpy as np
 
 from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
-from .profile import TIME_SUBSTEPS, ThetaProfile, quadratic_b
+from .profile import TIME_SUBSTEPS, ThetaProfile, linear_node_accelerations, quadratic_b
 from .transcription import BOUNDARY_REST, SolveRequest
 
 
@@ -268,8 +268,7 @@ class EnergyBound:
         b0 = np.clip((2 * np.pi / req.duration) ** 2, lo, 0.95 * ubb)
         bn = np.concatenate([[0.0], b0, [0.0]]) if self.boundary == BOUNDARY_REST else \
             np.append(b0, b0[0])
-        a_int = np.diff(bn) / (2 * np.diff(self.nodes.theta))
-        a0 = np.concatenate([a_int[:1], 0.5 * (a_int[:-1] + a_int[1:]), a_int[-1:]])[:na]
+        a0 = linear_node_accelerations(self.nodes.theta, bn)[:na]
         x0 = np.concatenate([b0, a0, np.sqrt(b0),
                              np.full(nsub, 2 * np.pi / req.duration), np.full(self._ne, 1.0)])
         t0 = time.perf_counter()

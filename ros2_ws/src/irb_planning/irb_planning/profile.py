@@ -39,6 +39,13 @@ def quadratic_b(b0, a0, a1, h, s):
     return b0 + 2.0 * a0 * s + (a1 - a0) / h * s ** 2
 
 
+def linear_node_accelerations(theta: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """theta_ddot at the nodes (N,) [rad/s^2] of b = theta_dot^2 (N,) linear between nodes
+    theta (N,): the mean of the two neighbouring intervals' (b_{k+1} - b_k) / (2 dtheta_k)."""
+    a = np.diff(b) / (2.0 * np.diff(theta))
+    return np.concatenate([a[:1], 0.5 * (a[:-1] + a[1:]), a[-1:]])
+
+
 @dataclass(frozen=True)
 class ThetaProfile:
     """theta (N,) [rad], theta_dot (N,) [rad/s] and optionally theta_ddot (N,) [rad/s^2] at
@@ -71,8 +78,8 @@ class ThetaProfile:
             if np.any(gap > CONSISTENCY_RTOL * max(1.0, float(b.max()))):
                 raise ValueError('theta_ddot inconsistent with theta_dot: b_{k+1} - b_k != '
                                  f'(a_k + a_{{k+1}}) dtheta_k (worst {gap.max():.3g})')
-            sub = self._pieces(th, b, a)
-            if np.any(sub[1] < 0) or np.any(sub[1][:-1] + sub[1][1:] <= 0):
+            b_pieces = self._pieces(th, b, a)[1]     # clamped at 0 (round-off)
+            if np.any(b_pieces[:-1] + b_pieces[1:] <= 0):
                 raise ValueError('theta_dot^2 of the quadratic profile goes negative or stops '
                                  'inside an interval')
         object.__setattr__(self, '_law', self._time_law())
@@ -115,8 +122,7 @@ class ThetaProfile:
         for a linear one the mean of the two neighbouring intervals."""
         if self.quadratic:
             return self.node_theta_ddot
-        a = self.theta_ddot
-        return np.concatenate([a[:1], 0.5 * (a[:-1] + a[1:]), a[-1:]])
+        return linear_node_accelerations(self.theta, self.theta_dot ** 2)
 
     @property
     def times(self) -> np.ndarray:

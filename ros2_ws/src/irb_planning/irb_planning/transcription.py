@@ -39,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from .problem import PathDynamics, SolveStats, ipopt_options, speed_bound
-from .profile import TIME_SUBSTEPS, ThetaProfile, quadratic_b
+from .profile import TIME_SUBSTEPS, ThetaProfile, linear_node_accelerations, quadratic_b
 
 BOUNDARY_REST = 'rest'
 BOUNDARY_PERIODIC = 'periodic'
@@ -190,7 +190,7 @@ class Transcription:
 
     # ------------------------------------------------------------------------------------
     def _bounds(self, req: SolveRequest):
-        N, K, n = self.N, self.N - 1, self.n
+        N, K = self.N, self.N - 1
         beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
         beta_m = speed_bound(self.mids.dq, req.velocity_limit)
         lo = req.min_theta_dot ** 2
@@ -233,8 +233,7 @@ class Transcription:
         else:
             b = np.append(xb, xb[0])
         # node a consistent with b on average (the collocation rows are met by the solver)
-        a_int = np.diff(b) / (2 * np.diff(self.nodes.theta))
-        a = np.concatenate([a_int[:1], 0.5 * (a_int[:-1] + a_int[1:]), a_int[-1:]])[:na]
+        a = linear_node_accelerations(self.nodes.theta, b)[:na]
         x0 = np.concatenate([xb, a, np.zeros(self._ne)])
         if self._ne:
             y = np.asarray(self._aux(x0)[4]).ravel()
