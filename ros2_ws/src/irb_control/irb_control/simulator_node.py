@@ -16,6 +16,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
 from irb_description.node_main import run_node
+from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
@@ -28,8 +29,8 @@ from .plant_effects import load_plant_effects
 
 
 def _stamp(t: float) -> Time:
-    sec = math.floor(t)
-    return Time(sec=int(sec), nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+    sec, nanosec = sec_nanosec(t)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def _seconds(stamp: Time) -> float:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from irb_description.model import RobotModel
 from irb_description.path import CirclePath
+from irb_description.stamps import sec_nanosec
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .profiles import (PathProfile, ProfileError, TimeTrajectory,
@@ -86,8 +87,7 @@ def theta_profile_msg(t: np.ndarray, theta: np.ndarray, theta_dot: np.ndarray,
     for ti, a, b, c in zip(t, theta, theta_dot, theta_ddot):
         p = JointTrajectoryPoint(positions=[float(a)], velocities=[float(b)],
                                  accelerations=[float(c)])
-        p.time_from_start.sec = int(ti)
-        p.time_from_start.nanosec = int(round((ti - int(ti)) * 1e9)) % 1_000_000_000
+        p.time_from_start.sec, p.time_from_start.nanosec = sec_nanosec(float(ti))
         msg.points.append(p)
     return msg
 
@@ -99,7 +99,6 @@ def joint_trajectory_msg(names: list[str], t: np.ndarray, q: np.ndarray, qd: np.
     for k, ti in enumerate(t):
         p = JointTrajectoryPoint(positions=q[k].tolist(), velocities=qd[k].tolist(),
                                  accelerations=qdd[k].tolist())
-        p.time_from_start.sec = int(ti)
-        p.time_from_start.nanosec = int(round((ti - int(ti)) * 1e9)) % 1_000_000_000
+        p.time_from_start.sec, p.time_from_start.nanosec = sec_nanosec(float(ti))
         msg.points.append(p)
     return msg

@@ -59,3 +59,17 @@ def test_state_bytes_and_commands_by_name(sim):
     sim.on_command_raw(serialize_message(JointState(name=['joint_1'], effort=[1.0])))
     sim.on_command_raw(b'\x00\x01\x00')
     assert len(applied) == n                                  # refused, nothing applied
+
+
+def test_camera_stamps_follow_sim_time_across_whole_seconds(sim):
+    """Camera points are stamped at their sample time, also where the accumulated time sits a
+    hair below a whole second (3.9999999999999587 s was once stamped 3.0 s)."""
+    sim.pub_cam = _Capture()
+    for _ in range(1200):                   # 4.84 s of simulated time: 484 camera points
+        sim.plant.step()
+        sim._after_step(_stamp)
+    stamps = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+                       for m in sim.pub_cam.sent])
+    assert stamps.size == 484               # 0, 0.01, ..., 4.83 s
+    np.testing.assert_allclose(np.diff(stamps), 0.01, atol=2e-9)
+    np.testing.assert_allclose(stamps, 0.01 * np.arange(stamps.size), atol=2e-9)

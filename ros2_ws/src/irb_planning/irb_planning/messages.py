@@ -7,11 +7,10 @@ between nodes (b = theta_dot^2 quadratic, profile.ThetaProfile); the rows hold n
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point
+from irb_description.stamps import sec_nanosec
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -44,8 +43,8 @@ def path_msg(req: PlanRequest) -> PathSpec:
 
 
 def _duration(t: float) -> Duration:
-    sec = int(math.floor(t))
-    return Duration(sec=sec, nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+    sec, nanosec = sec_nanosec(t)
+    return Duration(sec=sec, nanosec=nanosec)
 
 
 def trajectory_msg(result: PlanResult, nodes: dict) -> JointTrajectory:
