@@ -23,12 +23,14 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def _stop(proc):
+    """SIGINT to `ros2 run` (it forwards it to the node), SIGKILL to the whole session (both)
+    after 20 s."""
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:
-            proc.kill()
+            os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
 
 
@@ -38,11 +40,13 @@ def processes():
     common = ['--ros-args', '-r', f'__ns:={ns}']
     sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
                             '-p', 'mode:=lockstep'],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           start_new_session=True)
     ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
                              '-p', 'use_sim_time:=true', '-p', 'friction_mode:=nominal',
                              '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=false'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
     yield ns, sim, ctrl
     _stop(ctrl)
     _stop(sim)

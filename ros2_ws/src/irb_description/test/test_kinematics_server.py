@@ -22,14 +22,14 @@ def server():
     proc = subprocess.Popen(
         ['ros2', 'run', 'irb_description', 'kinematics_server', '--ros-args',
          '-r', f'solve_ik:={name}', '-r', f'__node:=kin_{uuid.uuid4().hex[:6]}'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     yield name, proc
-    if proc.poll() is None:
+    if proc.poll() is None:     # ros2 run forwards SIGINT; SIGKILL goes to both
         proc.send_signal(signal.SIGINT)
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:
-            proc.kill()
+            os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
 
 
