@@ -7,6 +7,7 @@ import os
 import signal
 import socket
 import subprocess
+import time
 import uuid
 
 import numpy as np
@@ -73,12 +74,13 @@ class Graph:
                                             start_new_session=True)
 
     def wait(self, condition, timeout_s=60.0):
-        """Spin until condition() holds; bounded by timeout_s of ROS spinning."""
-        for _ in range(int(timeout_s / 0.02)):
-            if condition():
-                return True
+        """Spin until condition() holds or ``timeout_s`` of wall time have passed."""
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            if time.monotonic() > deadline:
+                return False
             self.ex.spin_once(timeout_sec=0.02)
-        return condition()
+        return True
 
     def close(self):
         logs = {n: stop(p) for n, p in self.procs.items()}
@@ -95,6 +97,15 @@ def graph():
     g.close()
 
 
+def _modes(states):
+    """The controller's mode changes (and a stop reason) for assertion messages."""
+    out = []
+    for s in states:
+        if not out or out[-1][0] != s.mode:
+            out.append((s.mode, s.stop_reason))
+    return out
+
+
 def test_pdplus_runs_unchanged_against_the_bridge(graph):
     graph.start('axis', 'fake_axis_computer')
     graph.start('bridge', 'axis_bridge')
@@ -106,9 +117,10 @@ def test_pdplus_runs_unchanged_against_the_bridge(graph):
     graph.node.create_subscription(ControllerState, f'{graph.ns}/controller_state',
                                    states.append, state_qos())
     assert graph.wait(lambda: any(s.mode == ControllerState.MODE_PATH for s in states), 90), \
-        'pdplus never reached the path through the bridge'
+        f'pdplus never reached the path through the bridge: {_modes(states)}, {graph.diag}'
     assert graph.wait(lambda: int(graph.diag.get('commands_sent', 0)) > 400, 60)
-    assert graph.diag['axis_error'] == '0' and graph.diag['link_up'] == 'True'
+    assert graph.diag['axis_error'] == '0' and graph.diag['link_up'] == 'True', \
+        f'{graph.diag}, {_modes(states)}'
     last = states[-1]
     assert last.mode == ControllerState.MODE_PATH, last.stop_reason
     assert np.abs(np.asarray(last.q_error)).max() < 0.01       # tracking through UDP
@@ -139,8 +151,8 @@ def test_faults_link_loss_and_safe_reactions(graph):
     # every fault kind shows in the bridge's counters; no command is ever sent for junk
     def counters_seen():
         d = graph.diag
-        return all(int(d.get(f'rejected_{k}', 0)) > 0 for k in ('duplicate', 'stale', 'crc',
-                                                               'nan'))
+        return all(int(d.get(f'rejected_{k}', 0)) > 0
+                   for k in ('duplicate', 'stale', 'crc', 'nan'))
     assert graph.wait(counters_seen, 90), graph.diag
     assert graph.wait(lambda: int(graph.diag["commands_sent"]) > 100, 30), graph.diag
 

@@ -13,6 +13,7 @@ from rclpy.task import Future  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from irb_control import pd_plus  # noqa: E402
 from irb_control.node_util import latched_qos, state_qos  # noqa: E402
 from irb_control.pdplus_node import PdPlusNode  # noqa: E402
 from irb_control.trajectory_io import theta_profile_msg  # noqa: E402
@@ -232,3 +233,10 @@ def test_realtime_parameters_validated():
                 PdPlusNode(context=ctx, parameter_overrides=[bad])
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_controller_modes_equal_the_message_constants():
+    cs = ControllerState
+    assert (pd_plus.MODE_IDLE, pd_plus.MODE_RAMP, pd_plus.MODE_PATH, pd_plus.MODE_TIME,
+            pd_plus.MODE_STOPPED, pd_plus.MODE_HOLD) == (
+        cs.MODE_IDLE, cs.MODE_RAMP, cs.MODE_PATH, cs.MODE_TIME, cs.MODE_STOPPED, cs.MODE_HOLD)

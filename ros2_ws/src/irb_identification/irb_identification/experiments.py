@@ -8,7 +8,10 @@ offline_sim.py) and writes the bags directly. ros: publishes each run's referenc
 time-driven trajectory_msgs/JointTrajectory (joint_1..3, positions/velocities/accelerations
 every control period, time_from_start) on ``trajectory_topic`` for pdplus
 (``reference_mode:=time``, ``friction_mode:=none``) and records the run with an in-process
-recorder into <root>/<prefix>_<joint>_<speed>/.
+recorder into <root>/<prefix>_<joint>_<speed>/. A run is timed on what happens, not on the
+wall clock (the simulator may run in lockstep, many times faster than real time): it starts
+when pdplus, idle or holding, starts the published trajectory, and its bag is closed once the
+recorder holds ``run_margin_s`` of simulated time after pdplus reached HOLD (run_timing.py).
 """
 from __future__ import annotations
 
@@ -28,6 +31,20 @@ from .offline_sim import PERIOD_S, SimConfig, simulate, start_pose, write_run_ba
 from .profiles import DEFAULT_SPEEDS, ConstantVelocityProfile, joint_reference
 from .recorder_node import DEFAULT_TOPICS, RecorderNode
 from .rosutil import default_bag_root
+from .run_timing import (FAILED, MODE_NAMES, CdrError, RunMonitor, controller_state_head,
+                         stamp_of)
+
+DEFAULT_CENTER = (0.0, 0.5, -0.8)
+"""Default pose [rad] the moving joint is centred on. Joints 2 and 3 set joint 1's inertia:
+with the arm upright (0, 0, 0) it is 10 kg m^2, half of what pdplus's gains are tuned for on
+the thesis circle (about 22), and joint 1 then oscillates at about 15 Hz under PD without
+friction feed-forward (3-sample delay) - stick-slip below the Stribeck speed. Here it is
+19 kg m^2, and the sweeps of joints 2 and 3 (up to 2 rad/s, +-0.85 rad) stay inside the
+limits with the flange at least 0.2 m above the base plane."""
+
+
+class RunError(RuntimeError):
+    """A ROS-mode run failed (pdplus stopped, did not start, or the wall-clock bound hit)."""
 
 
 class ExperimentsNode(Node):
@@ -50,8 +67,9 @@ class ExperimentsNode(Node):
             hold_max_s=param('hold_max_s', 4.0, '[s] longest hold'),
             periods=param('periods', 1, 'back-and-forth periods per run'),
             settle_s=param('settle_s', 0.5, '[s] standstill before the first period'))
-        self.center = np.array(param('center_rad', [0.0, 0.0, 0.0],
-                                     '[rad] pose the moving joint is centred on'))
+        self.center = np.array(param('center_rad', list(DEFAULT_CENTER),
+                                     '[rad] pose the moving joint is centred on (the other '
+                                     'joints stand there)'))
         root = param('root', '', "bag root; '' = $IRB_ROOT/bags or ./bags")
         self.root = Path(root) if root else default_bag_root()
         self.prefix = param('prefix', '', "bag name prefix; '' = friction_<date>_<time>") or \
@@ -67,7 +85,22 @@ class ExperimentsNode(Node):
         self.record_topics = list(param('record_topics', DEFAULT_TOPICS,
                                         'ros mode: topics recorded per run'))
         self.margin = param('run_margin_s', 1.5,
-                            '[s] ros mode: recorded beyond the profile (pdplus ramp-in)')
+                            '[s] ros mode: simulated time recorded after pdplus reaches HOLD')
+        self.state_topic = param('controller_state_topic', '/controller_state',
+                                 "ros mode: pdplus's ControllerState topic (runs are timed "
+                                 'on it)')
+        self.js_topic = param('joint_states_topic', '/joint_states',
+                              'ros mode: JointState topic (the recorded margin is checked on '
+                              'its stamps)')
+        self.start_timeout = param('start_timeout_s', 5.0,
+                                   '[s] ros mode: simulated time after publishing within which '
+                                   'pdplus must start the run')
+        self.run_timeout = param('run_timeout_s', 120.0,
+                                 '[s] ros mode: wall-clock bound of one run (an error, never a '
+                                 'hang)')
+        for t in (self.js_topic, self.state_topic):
+            if t not in self.record_topics:
+                self.record_topics.append(t)
         from irb_description.model import RobotModel
         self.model = RobotModel.load()
         unknown = [j for j in self.joints if j not in self.model.joint_names]
@@ -110,29 +143,108 @@ class ExperimentsNode(Node):
         return msg
 
     def run_ros(self, executor) -> list[Path]:
+        """Every run through pdplus; RunError after all runs if any failed (the others'
+        bags are kept), at once if a run hits the wall-clock bound."""
         from trajectory_msgs.msg import JointTrajectory
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         pub = self.create_publisher(JointTrajectory, self.topic, QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        bags = []
+        self._wait_controller_idle(executor)
+        bags, failed = [], []
         for j, prof, q0, name in self.runs():
-            rec = RecorderNode(node_name='experiments_recorder', context=self.context,
-                               parameter_overrides=[
-                                   Parameter('root', value=str(self.root)),
-                                   Parameter('name', value=name),
-                                   Parameter('topics', value=self.record_topics),
-                                   Parameter('recover_on_start', value=False)])
-            executor.add_node(rec)
-            pub.publish(self.trajectory(j, prof, q0))
-            end = time.monotonic() + prof.duration + self.margin
-            while rclpy.ok(context=self.context) and time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
+            try:
+                bags.append(self._run_one(executor, pub, j, prof, q0, name))
+            except RunError as exc:
+                self.get_logger().error(str(exc))
+                failed.append(str(exc))
+        if failed:
+            raise RunError(f'{len(failed)} of {len(failed) + len(bags)} runs failed: '
+                           + '; '.join(failed))
+        return bags
+
+    def _spin_until(self, executor, cond, deadline: float, what: str) -> None:
+        """spin_once until cond(); RunError naming ``what`` at the wall-clock ``deadline``."""
+        while not cond():
+            if not rclpy.ok(context=self.context):
+                raise KeyboardInterrupt
+            if time.monotonic() > deadline:
+                raise RunError(f'{what}: no progress within run_timeout_s = '
+                               f'{self.run_timeout} s of wall time')
+            executor.spin_once(timeout_sec=0.05)
+
+    def _wait_controller_idle(self, executor) -> None:
+        """Before the first run: wait until pdplus reports a state and is not moving (it may
+        still run its built-in profile, which would refuse the first trajectory)."""
+        from irb_control.node_util import state_qos
+        from irb_interfaces.msg import ControllerState
+        mon = RunMonitor()
+        seen = []
+
+        def on_state(data):
+            mon.on_state(*controller_state_head(data))
+            if not seen or seen[-1] != mon.mode:
+                seen.append(mon.mode)
+        sub = self.create_subscription(ControllerState, self.state_topic, on_state,
+                                       state_qos(), raw=True)
+        try:
+            self._spin_until(executor, lambda: mon.mode is not None and not mon.is_moving,
+                             time.monotonic() + self.run_timeout,
+                             f'waiting for pdplus on {self.state_topic} to be idle')
+        finally:
+            self.destroy_subscription(sub)
+        if len(seen) > 1:
+            self.get_logger().info(
+                'pdplus was running another motion ('
+                + ' -> '.join(MODE_NAMES.get(m, str(m)) for m in seen) + '): waited for it')
+
+    def _run_one(self, executor, pub, j, prof, q0, name) -> Path:
+        """One run: recorder up and receiving, pdplus not moving -> publish -> RAMP/TIME ->
+        HOLD -> ``run_margin_s`` of simulated time recorded -> bag closed."""
+        mon = RunMonitor(margin_s=self.margin, start_timeout_s=self.start_timeout)
+
+        def on_state(data):
+            try:
+                mon.on_state(*controller_state_head(data))
+            except CdrError as exc:
+                mon.fail(f'unreadable controller state: {exc}')
+
+        def on_joint_state(data):
+            try:
+                mon.on_recorded(stamp_of(data))
+            except CdrError as exc:
+                mon.fail(f'unreadable joint state: {exc}')
+        traj = self.trajectory(j, prof, q0)
+        rec = RecorderNode(node_name='experiments_recorder', context=self.context,
+                           taps={self.state_topic: on_state, self.js_topic: on_joint_state},
+                           parameter_overrides=[
+                               Parameter('root', value=str(self.root)),
+                               Parameter('name', value=name),
+                               Parameter('topics', value=self.record_topics),
+                               Parameter('recover_on_start', value=False)])
+        executor.add_node(rec)
+        deadline = time.monotonic() + self.run_timeout
+        try:
+            counts = rec.writer.counts
+            self._spin_until(executor, lambda: (counts.get(self.js_topic, 0) > 0
+                                                and counts.get(self.state_topic, 0) > 0
+                                                and not mon.is_moving),
+                             deadline, f'{name}: recorder receiving, pdplus not moving')
+            mon.start(mon.t_state)
+            pub.publish(traj)
+            self._spin_until(executor, lambda: mon.finished, deadline,
+                             f'{name}: run (phase {mon.phase})')
+        finally:
             executor.remove_node(rec)
             rec.close()
             rec.destroy_node()
-            bags.append(rec.bag_path)
-        return bags
+        if mon.phase == FAILED:
+            raise RunError(f'{name}: {mon.error} (bag {rec.bag_path} kept)')
+        self.get_logger().info(
+            f'{name}: published at t = {mon.t_publish:.3f} s, pdplus moving '
+            f'{mon.t_start:.3f}-{mon.t_hold:.3f} s (profile {prof.duration:.2f} s), recorded '
+            f'to {mon.t_recorded:.3f} s (simulated time)')
+        return rec.bag_path
 
 
 def main(args=None):
@@ -152,7 +264,7 @@ def main(args=None):
               + ' '.join(f'--bag {b}' for b in bags) + ' --out friction_map.yaml')
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ValueError as exc:
+    except (ValueError, RunError) as exc:
         print(f'experiments: {exc}', file=sys.stderr)
         return 1
     finally:

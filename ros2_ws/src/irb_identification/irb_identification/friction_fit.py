@@ -9,7 +9,7 @@ irb_description/friction.py).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from irb_description.friction import FrictionMap, JointFriction
@@ -17,7 +17,8 @@ from numpy.polynomial import Polynomial
 from scipy import stats
 from scipy.optimize import least_squares
 
-from .segments import SegmentConfig, SpeedPoint, find_segments, speed_points
+from .segments import (Rejection, SegmentConfig, SpeedPoint, find_segments, rolling_mean_std,
+                       speed_points)
 from .series import JointSeries
 
 PARAMS = ('coulomb', 'static', 'stribeck_velocity', 'viscous')
@@ -76,7 +77,8 @@ class ParametricFit:
 
 @dataclass(frozen=True)
 class JointResult:
-    """Identification of one joint: points, fits, the map entry, warnings; or ``error``."""
+    """Identification of one joint: points, fits, the map entry, warnings; or ``error``.
+    ``rejected``: (label of the series, Rejection) of every hold dropped for stick-slip."""
 
     name: str
     points: list[SpeedPoint]
@@ -86,6 +88,7 @@ class JointResult:
     friction: JointFriction | None = None
     warnings: list[str] = field(default_factory=list)
     error: str | None = None
+    rejected: list[tuple[str, Rejection]] = field(default_factory=list)
 
 
 def _parametric(v, fc, ds, vs, fv):
@@ -216,32 +219,85 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
 
 
 def identify_series(series_list: list[JointSeries], joint_names: list[str],
-                    config: FitConfig = FitConfig(), model=None) -> list[JointResult]:
+                    config: FitConfig = FitConfig(), model=None,
+                    labels: list[str] | None = None) -> list[JointResult]:
     """Identify every joint of ``joint_names`` from one or more JointSeries (one per bag).
 
     ``model`` (irb_description RobotModel), optional: per-sign friction compensated by the
     model's M qdd + C qd + g on each segment (keeps an asymmetry eq. 4.8 averages away);
-    eq. 4.8's tau_f is computed either way.
+    eq. 4.8's tau_f is computed either way. ``labels`` (one per series, e.g. the bag names)
+    name the series in warnings and rejections. Holds with a stick-slip signature are left
+    out and listed in ``JointResult.rejected`` (and summarised in its warnings); a series in
+    which a joint moved back and forth on its own but never held a steady speed gives a
+    warning (a sweep lost entirely, e.g. to stick-slip).
     """
+    labels = list(labels) if labels is not None else [f'series {k}'
+                                                      for k in range(len(series_list))]
     segs = {j: [] for j in range(len(joint_names))}
+    rejected = {j: [] for j in segs}
+    unsteady = {j: [] for j in segs}
+
     def model_torque(q, qd):
         zero = np.zeros(q.shape[1])
         return np.array([model.inverse_dynamics(a, b, zero) for a, b in zip(q, qd)])
     mt = model_torque if model is not None else None
-    for s in series_list:
+    for s, label in zip(series_list, labels):
         s = s.select(joint_names)
         for j in segs:
-            segs[j].extend(find_segments(s, j, config.segments, mt))
+            rej = []
+            found = find_segments(s, j, config.segments, mt, rej)
+            segs[j].extend(found)
+            rejected[j].extend((label, r) for r in rej)
+            if not found and not rej:
+                fwd, bwd = _time_moving_alone(s, j, config.segments)
+                if min(fwd, bwd) >= 2 * config.segments.min_duration_s:
+                    unsteady[j].append(f'{label}: {joint_names[j]} moved back and forth on '
+                                       f'its own ({fwd:.2f} s / {bwd:.2f} s) but never at a '
+                                       'steady speed: no hold (stick-slip, chatter or '
+                                       'dropped messages?)')
     results = []
     for j, name in enumerate(joint_names):
+        notes = list(unsteady[j])
+        if rejected[j]:
+            notes.append(f'{name}: {len(rejected[j])} hold(s) rejected (stick-slip '
+                         'signature): '
+                         + '; '.join(f'{lab} {r.speed:+.4g} rad/s '
+                                     f'{r.t_start:.2f}-{r.t_end:.2f} s ({r.reason})'
+                                     for lab, r in rejected[j]))
         if not segs[j]:
-            results.append(JointResult(name, [], error=(
-                f'{name}: no constant-speed segments (joint never held a constant speed '
-                f'with the other joints still)')))
+            results.append(JointResult(name, [], warnings=notes, rejected=rejected[j],
+                                       error=(f'{name}: no constant-speed segments (joint '
+                                              f'never held a constant speed with the other '
+                                              f'joints still)')))
             continue
         points, warnings = speed_points(segs[j], config.pair_rel_tol)
-        results.append(identify_points(name, points, config, warnings))
+        res = identify_points(name, points, config, notes + warnings)
+        results.append(replace(res, rejected=rejected[j]))
     return results
+
+
+def _time_moving_alone(series: JointSeries, joint: int, config: SegmentConfig
+                       ) -> tuple[float, float]:
+    """Times [s] in which ``joint`` moves forward and backward (rolling mean speed over
+    window_s above min_speed) while the others stay below still_tol: a back-and-forth of that
+    joint alone, as an eq. 4.1 sweep (a move between two poses goes one way only)."""
+    t = series.t
+    if len(t) < 3:
+        return 0.0, 0.0
+    dt = float(np.median(np.diff(t)))
+    if not dt > 0:
+        return 0.0, 0.0
+    w = max(3, int(round(config.window_s / dt)))
+    means = [rolling_mean_std(series.velocity[:, k], w)[0]
+             for k in range(series.velocity.shape[1])]
+    alone = np.ones(len(t), bool)
+    for k, m in enumerate(means):
+        if k != joint:
+            alone &= np.abs(m) < config.still_tol
+    step = np.minimum(np.diff(t, append=t[-1]), 2 * dt)      # a recording gap counts 2 dt
+    fwd = alone & (means[joint] > config.min_speed)
+    bwd = alone & (means[joint] < -config.min_speed)
+    return float(np.sum(step[fwd])), float(np.sum(step[bwd]))
 
 
 def friction_map(results: list[JointResult], source: str,

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .bagio import BagError
 from .friction_fit import FitConfig, IdentificationError, friction_map, identify_series
+from .segments import SegmentConfig
 from .series import JointStateError, read_joint_series
 
 
@@ -32,6 +33,10 @@ def _parser() -> argparse.ArgumentParser:
                    help='per-sign points = torque - model M qdd + C qd + g (keeps asymmetry)')
     p.add_argument('--fill-nominal', action='store_true',
                    help='write joints that fail with the nominal friction of irb_description')
+    p.add_argument('--effort-lag-s', type=float, default=0.0,
+                   help='[s] the effort of a sample is the torque that acted this long before '
+                   'it (e.g. 0.002016 = half a period for the mean torque of the period '
+                   'before the sample); corrects eq. 4.8 where gravity varies with position')
     p.add_argument('--json', default=None, help='also write a JSON report here')
     return p
 
@@ -43,19 +48,21 @@ def main(args=None) -> int:
     opts = _parser().parse_args(argv)
     from irb_description.model import RobotModel
     model = RobotModel.load()
-    series, problems = [], []
+    series, labels, problems = [], [], []
     for bag in opts.bag:
         try:
             series.append(read_joint_series(bag, opts.topic))
+            labels.append(Path(bag).name)
         except (BagError, JointStateError) as exc:
             problems.append(str(exc))
             print(f'identify: skipping: {exc}', file=sys.stderr)
     if not series:
         print('identify: no usable bag', file=sys.stderr)
         return 1
-    config = FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds)
+    config = FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds,
+                       segments=SegmentConfig(effort_lag_s=opts.effort_lag_s))
     results = identify_series(series, model.joint_names, config,
-                              model=model if opts.model_compensation else None)
+                              model=model if opts.model_compensation else None, labels=labels)
     source = 'identified from ' + ', '.join(Path(b).name for b in opts.bag)
     try:
         fmap = friction_map(results, source, model.friction if opts.fill_nominal else None)
@@ -65,10 +72,14 @@ def main(args=None) -> int:
     out = Path(opts.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fmap.save(out)
-    report = {'out': str(out), 'bags': opts.bag, 'problems': problems, 'joints': {}}
+    report = {'out': str(out), 'bags': opts.bag, 'problems': problems,
+              'effort_lag_s': opts.effort_lag_s, 'joints': {}}
     plot_dir = None if opts.no_plots else Path(opts.plots) if opts.plots else out.parent
     for r in results:
-        entry = {'speeds': len(r.points), 'error': r.error, 'warnings': r.warnings}
+        entry = {'speeds': len(r.points), 'error': r.error, 'warnings': r.warnings,
+                 'rejected_segments': [{'bag': label, 'speed_rad_s': x.speed,
+                                        't_start_s': x.t_start, 't_end_s': x.t_end,
+                                        'reason': x.reason} for label, x in r.rejected]}
         if r.parametric is not None:
             pf = r.parametric
             entry.update(coulomb=pf.coulomb, static=pf.static,
@@ -81,6 +92,8 @@ def main(args=None) -> int:
         report['joints'][r.name] = entry
         status = r.error or (f'F_c {pf.coulomb:.3f} N m, F_v {pf.viscous:.3f} N m s/rad, '
                              f'{len(r.points)} speeds')
+        if r.rejected:
+            status += f' ({len(r.rejected)} hold(s) rejected: stick-slip signature)'
         print(f'identify: {r.name}: {status}')
         for w in r.warnings:
             print(f'identify: warning: {w}', file=sys.stderr)

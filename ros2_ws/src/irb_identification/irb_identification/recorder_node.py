@@ -24,8 +24,11 @@ DEFAULT_TOPICS = ['/joint_states', '/torque_command', '/controller_state', '/cam
 class RecorderNode(Node):
     """Subscribes raw to the chosen topics and writes their CDR bytes to a BagWriter."""
 
-    def __init__(self, node_name: str = 'recorder', **kwargs):
+    def __init__(self, node_name: str = 'recorder', taps: dict | None = None, **kwargs):
+        """``taps`` (in-process use): {topic: callable(bytes)} called with every message of
+        that topic after it is written (the experiments node follows its runs with them)."""
         super().__init__(node_name, **kwargs)
+        self.taps = dict(taps or {})
 
         def param(name, default, text):
             return self.declare_parameter(name, default, ParameterDescriptor(
@@ -97,10 +100,15 @@ class RecorderNode(Node):
     def _callback(self, topic: str):
         write = self.writer.write
         clock = self.get_clock()
+        tap = self.taps.get(topic)
 
         def cb(data: bytes) -> None:
             write(topic, clock.now().nanoseconds, data)
-        return cb
+
+        def cb_tap(data: bytes) -> None:
+            write(topic, clock.now().nanoseconds, data)
+            tap(data)
+        return cb if tap is None else cb_tap
 
     def _housekeeping(self) -> None:
         if not self.writer.maybe_split():

@@ -11,12 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from irb_control.pd_plus import MODE_PATH
 
 from .bagio import read_messages, typestore
 from .series import read_joint_series
 
 CONTROLLER_STATE = 'irb_interfaces/msg/ControllerState'
-MODE_PATH = 2
 
 
 @dataclass

@@ -2,9 +2,14 @@
 
 ``find_segments`` finds, per joint, the stretches where that joint moves at a constant speed
 while the others stand still (the holds of eq. 4.1), trims their transients and averages speed
-and torque over them. ``speed_points`` pairs the +c and -c segments of equal speed and applies
-eq. 4.8, tau_f(c) = (tau_+ - tau_-) / 2, which cancels gravity because both holds cover the
-same positions.
+and torque over them (torque as a time average, so that samples the recorder dropped do not
+bias it). A stretch that passes the local (rolling) constancy test but shows a stick-slip
+signature over its whole length - the joint stops inside it, or its speed is not steady
+within the tolerance - is rejected, and the rejection is returned with its reason for the
+caller to report: its mean torque is not the friction at a constant speed. ``speed_points``
+pairs the +c and -c segments of equal speed and applies eq. 4.8,
+tau_f(c) = (tau_+ - tau_-) / 2, which cancels gravity because both holds cover the same
+positions.
 """
 from __future__ import annotations
 
@@ -24,6 +29,14 @@ class SegmentConfig:
     [rad/s]: slower is "standing still"; min_duration_s [s]: shortest usable hold (after
     trimming); trim_s [s] and trim_fraction [-]: cut from both ends of a hold; still_tol
     [rad/s]: mean speed allowed on the other joints (plus still_rel_tol |v|).
+    Stick-slip rejection of a (trimmed) hold at mean speed c: stick_samples consecutive
+    samples with v sign(c) < stick_fraction |c| [-] (the joint stops or turns back inside the
+    hold), or a speed std over the whole hold above velocity_tol + velocity_rel_tol |c|.
+    effort_lag_s [s]: the effort of a sample is the torque that acted at t - effort_lag_s on
+    average (e.g. half a period when it is the mean applied torque of the period before the
+    sample); the torque is then referred to the position q - v effort_lag_s. At constant speed
+    c this matters where gravity varies with position: a slope g' [N m/rad] would otherwise
+    bias eq. 4.8 by g' c effort_lag_s (like extra viscous friction).
     """
 
     window_s: float = 0.1
@@ -35,13 +48,18 @@ class SegmentConfig:
     trim_fraction: float = 0.15
     still_tol: float = 0.01
     still_rel_tol: float = 0.1
+    stick_fraction: float = 0.25
+    stick_samples: int = 3
+    effort_lag_s: float = 0.0
 
 
 @dataclass(frozen=True)
 class Segment:
     """One constant-speed hold of ``joint`` (index): times [s], mean/std speed [rad/s],
-    mean/std torque [N m], mean model torque without friction [N m] (nan if not computed),
-    samples, position range [rad]."""
+    mean (time average)/std torque [N m], mean model torque without friction [N m] (nan if
+    not computed), samples, position range [rad], q_mean [rad]: the time-averaged position
+    where the torque acted (minus effort_lag_s x speed), torque_slope [N m/rad]: the slope of
+    torque over position within the hold (gravity)."""
 
     joint: int
     t_start: float
@@ -53,11 +71,26 @@ class Segment:
     model_torque: float
     samples: int
     q_range: tuple[float, float]
+    q_mean: float = float('nan')
+    torque_slope: float = 0.0
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A hold of ``joint`` (index) not used, from t_start to t_end [s] at mean speed
+    [rad/s], and why (``reason``, one line with the numbers)."""
+
+    joint: int
+    t_start: float
+    t_end: float
+    speed: float
+    reason: str
 
 
 @dataclass(frozen=True)
 class SpeedPoint:
-    """A +c/-c pair: speed c > 0 [rad/s]; tau_plus, tau_minus mean torques [N m];
+    """A +c/-c pair: speed c > 0 [rad/s]; tau_plus, tau_minus mean torques [N m], both
+    referred to the same position (see ``speed_points``);
     tau_f = (tau_plus - tau_minus) / 2 (eq. 4.8); per-sign friction f_pos = tau_f(+c) > 0 and
     f_neg = tau_f(-c) < 0 [N m] (model-compensated if a model torque was given, else +-tau_f);
     sem: standard error of tau_f [N m]; segments used on each side."""
@@ -73,8 +106,9 @@ class SpeedPoint:
     n_minus: int
 
 
-def _rolling(x: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """Centred rolling mean and std over ``w`` samples (edges use partial windows)."""
+def rolling_mean_std(x: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Centred rolling mean and std (N,) of x (N,) over ``w`` samples (edges use partial
+    windows)."""
     c1 = np.concatenate([[0.0], np.cumsum(x)])
     c2 = np.concatenate([[0.0], np.cumsum(x * x)])
     n = len(x)
@@ -92,13 +126,31 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
+def stick_slip(v: np.ndarray, config: SegmentConfig = SegmentConfig()) -> str | None:
+    """Why the speeds v (k,) [rad/s] of one hold are not a steady constant speed (stick-slip
+    signature, see SegmentConfig), or None if they are."""
+    c = float(np.mean(v))
+    tol = config.velocity_tol + config.velocity_rel_tol * abs(c)
+    stuck = np.sign(c) * v < config.stick_fraction * abs(c)
+    longest = max((b - a for a, b in _runs(stuck)), default=0)
+    if longest >= config.stick_samples:
+        return (f'the joint stops inside the hold ({int(stuck.sum())} samples '
+                f'below {config.stick_fraction:g} x {abs(c):.4g} rad/s, longest run '
+                f'{longest})')
+    std = float(np.std(v))
+    if std > tol:
+        return f'speed not steady (std {std:.4g} > {tol:.4g} rad/s)'
+    return None
+
+
 def find_segments(series: JointSeries, joint: int, config: SegmentConfig = SegmentConfig(),
-                  model_torque=None) -> list[Segment]:
+                  model_torque=None, rejected: list | None = None) -> list[Segment]:
     """Constant-speed holds of ``joint`` with the other joints still.
 
     ``model_torque``, optional: callable (q (k, n) [rad], qd (k, n) [rad/s]) -> (k, n) [N m],
     M qdd + C qd + g without friction at qdd = 0; its segment mean (over up to 50 samples)
-    gives the model-compensated per-sign friction.
+    gives the model-compensated per-sign friction. ``rejected``, optional: a list that gets
+    a ``Rejection`` for every hold dropped for a stick-slip signature.
     """
     t = series.t
     if len(t) < 3:
@@ -109,7 +161,7 @@ def find_segments(series: JointSeries, joint: int, config: SegmentConfig = Segme
     v = series.velocity[:, joint]
     tau = series.effort[:, joint]
     w = max(3, int(round(config.window_s / dt)))
-    mean, std = _rolling(v, w)
+    mean, std = rolling_mean_std(v, w)
     ok = ((np.abs(mean) > config.min_speed)
           & (std < config.velocity_tol + config.velocity_rel_tol * np.abs(mean))
           & np.isfinite(tau))
@@ -129,27 +181,63 @@ def find_segments(series: JointSeries, joint: int, config: SegmentConfig = Segme
             still = np.abs(series.velocity[sel][:, others].mean(axis=0))
             if np.any(still > config.still_tol + config.still_rel_tol * abs(c)):
                 continue
+        why = stick_slip(vs, config)
+        if why is not None:
+            if rejected is not None:
+                rejected.append(Rejection(joint, float(t[sel[0]]), float(t[sel[-1]]), c, why))
+            continue
         half = len(sel) // 2
         if abs(vs[:half].mean() - vs[half:].mean()) > (config.velocity_tol
                                                        + config.velocity_rel_tol * abs(c)):
             continue                     # drifting speed: not a hold
         qs = series.position[sel, joint]
+        wt = time_weights(t[sel])
+        q_avg = float(np.sum(wt * qs))
+        dq = qs - q_avg
+        sxx = float(np.sum(wt * dq * dq))
+        tau_mean = float(np.sum(wt * tau[sel]))
+        slope = float(np.sum(wt * dq * (tau[sel] - tau_mean)) / sxx) if sxx > 1e-18 else 0.0
         mt = np.nan
         if model_torque is not None:
-            sub = sel[np.linspace(0, len(sel) - 1, min(50, len(sel))).astype(int)]
-            mt = float(np.mean(model_torque(series.position[sub],
-                                            series.velocity[sub])[:, joint]))
+            sub = np.linspace(0, len(sel) - 1, min(50, len(sel))).astype(int)
+            qd_sub = series.velocity[sel[sub]]
+            mts = model_torque(series.position[sel[sub]] - config.effort_lag_s * qd_sub,
+                               qd_sub)[:, joint]
+            mt = float(np.sum(time_weights(t[sel[sub]]) * mts))
         out.append(Segment(joint, float(t[sel[0]]), float(t[sel[-1]]), c, float(vs.std()),
-                           float(tau[sel].mean()), float(tau[sel].std()), mt, len(sel),
-                           (float(qs.min()), float(qs.max()))))
+                           tau_mean, float(tau[sel].std()), mt, len(sel),
+                           (float(qs.min()), float(qs.max())),
+                           q_avg - config.effort_lag_s * c, slope))
     return out
+
+
+def time_weights(t: np.ndarray) -> np.ndarray:
+    """Weights (k,) summing to 1 that turn samples at times t (k,) [s] into the time average
+    of their piecewise-linear interpolation (trapezoidal rule). Equal to the plain mean's
+    1/k (but half at both ends) for evenly spaced samples; a gap in the recording (dropped
+    messages) does not shift the average towards the better-covered part of the hold, where
+    gravity differs (eq. 4.8 needs both holds averaged over the same positions)."""
+    t = np.asarray(t, float)
+    if len(t) < 2 or not t[-1] > t[0]:
+        return np.full(len(t), 1.0 / max(len(t), 1))
+    d = np.diff(t)
+    w = np.zeros(len(t))
+    w[:-1] += d
+    w[1:] += d
+    return w / w.sum()
 
 
 def speed_points(segments: list[Segment], rel_tol: float = 0.1
                  ) -> tuple[list[SpeedPoint], list[str]]:
     """Pair +c and -c segments whose |speed| agree within ``rel_tol``; apply eq. 4.8.
 
-    Returns the points (sorted by speed) and warnings for speeds seen with one sign only.
+    Eq. 4.8 cancels gravity only if tau_+ and tau_- are taken at the same positions. The
+    holds of eq. 4.1 cover the same stroke, but the detected (trimmed) segments need not:
+    messages a recorder dropped at a segment's end shift it. Each side's mean torque is
+    therefore moved along its own torque-over-position line (``torque_slope``) from its mean
+    position to the common one, q_ref = (q_mean_+ + q_mean_-) / 2 (no change when both sides
+    are centred alike). Returns the points (sorted by speed) and warnings for speeds seen
+    with one sign only.
     """
     segs = sorted(segments, key=lambda s: abs(s.speed))
     clusters: list[list[Segment]] = []
@@ -173,11 +261,16 @@ def speed_points(segments: list[Segment], rel_tol: float = 0.1
             return float(np.sum(w * np.array([getattr(s, attr) for s in ss])) / w.sum())
 
         tp, tm = wmean(pos, 'torque'), wmean(neg, 'torque')
-        tau_f = 0.5 * (tp - tm)
         gp, gm = wmean(pos, 'model_torque'), wmean(neg, 'model_torque')
         if np.isfinite(gp) and np.isfinite(gm):
-            f_pos, f_neg = tp - gp, tm - gm
-        else:
+            f_pos, f_neg = tp - gp, tm - gm       # the model is taken at each side's positions
+        qp, qm = wmean(pos, 'q_mean'), wmean(neg, 'q_mean')
+        if np.isfinite(qp) and np.isfinite(qm):
+            q_ref = 0.5 * (qp + qm)
+            tp += wmean(pos, 'torque_slope') * (q_ref - qp)
+            tm += wmean(neg, 'torque_slope') * (q_ref - qm)
+        tau_f = 0.5 * (tp - tm)
+        if not (np.isfinite(gp) and np.isfinite(gm)):
             f_pos, f_neg = tau_f, -tau_f
 
         def sem(ss):

@@ -180,14 +180,16 @@ def main(args=None) -> int:
         log(f'1/{PHASES} identification sweeps: {len(cfg["joints"])} joints x '
             f'{len(cfg["speeds_rad_s"])} speeds through pdplus (time-driven, no FF)')
         prefix = f'{run_id}_friction'
-        g = graph([sim, ProcessSpec('pdplus', ros2_run_cmd(
-            'irb_control', 'pdplus', params={'use_sim_time': True, 'reference_mode': 'time',
-                                             'friction_mode': 'none'})),
-            ProcessSpec('experiments', ros2_run_cmd('irb_identification', 'experiments', params={
+        pdplus = ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', params={
+            'use_sim_time': True, 'reference_mode': 'time', 'friction_mode': 'none'}))
+        experiments = ProcessSpec('experiments', ros2_run_cmd(
+            'irb_identification', 'experiments', params={
                 'mode': 'ros', 'use_sim_time': True, 'root': str(bags), 'prefix': prefix,
                 'joints': str(list(cfg['joints'])),
                 'speeds_rad_s': str([float(s) for s in cfg['speeds_rad_s']]),
-                'hold_max_s': float(cfg['hold_max_s'])}), required=False)])
+                'hold_max_s': float(cfg['hold_max_s']),
+                'hold_min_s': float(cfg.get('hold_min_s', 0.6))}), required=False)
+        g = graph([sim, pdplus, experiments])
         n_runs = len(cfg['joints']) * len(cfg['speeds_rad_s'])
         done = g.wait_until(lambda: g.procs['experiments'].poll() is not None,
                             cfg['phase_timeout_s'], period_s=0.5)
@@ -203,7 +205,8 @@ def main(args=None) -> int:
         log(f'2/{PHASES} identify: friction map from the bags')
         fmap = out / 'friction_map.yaml'
         cmd = ['ros2', 'run', 'irb_identification', 'identify', '--out', str(fmap), '--plots',
-               str(out / 'friction'), '--json', str(out / 'identify.json'), '--fill-nominal']
+               str(out / 'friction'), '--json', str(out / 'identify.json'), '--fill-nominal',
+               '--effort-lag-s', str(float(cfg.get('effort_lag_s', 0.0)))]
         for b in sweep_bags:
             cmd += ['--bag', b]
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
@@ -211,6 +214,8 @@ def main(args=None) -> int:
             raise RuntimeError(f'identify failed: {res.stderr.strip() or res.stdout.strip()}')
         if res.returncode == 2:
             log('   some joints not identified, nominal values used for them (see report)')
+        for line in res.stderr.splitlines():      # rejected holds, one-sided speeds, ...
+            log(f'   {line}')
         log(f'   map written: {fmap}')
 
         # 3, 4 ------------------------------------------------------------------------------
@@ -303,7 +308,7 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     rows = [(n, f'{j.coulomb:.2f} ± {j.ci95.get("coulomb", float("nan")):.2f}',
              f'{j.viscous:.2f} ± {j.ci95.get("viscous", float("nan")):.2f}', f'{j.static:.2f}',
              f'{p.coulomb:.2f} / {p.viscous:.2f} / {p.static:.2f}',
-             f'{j.valid_range[0]:g}-{j.valid_range[1]:g}')
+             f'{j.valid_range[0]:.3g}-{j.valid_range[1]:.3g}')
             for n, j, p in zip(names, ident.joints, plant.joints)]
     resp = plans['energy_ff']
     pts = resp.trajectory.points
@@ -324,6 +329,12 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
              'int |g(Phi)^T Phi\'| dtheta, depends on the path only, not on the timing; it '
              'dominates this circle (joint 2), which bounds what any speed profile can save '
              'in this model']
+    ident_json = json.loads((out / 'identify.json').read_text())
+    for name, entry in ident_json['joints'].items():
+        rej = entry.get('rejected_segments', [])
+        if rej:
+            notes.append(f'identification, {name}: {len(rej)} hold(s) rejected for a '
+                         'stick-slip signature (identify.json, rejected_segments)')
     markdown_report(run_id, figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff'],
                     plots, rows, sorted(str(p) for p in (out / 'friction').glob('*.png')),
                     plan_rows, str(plan_plot), bags, notes, out / 'report.md')

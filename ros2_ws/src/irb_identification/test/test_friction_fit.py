@@ -98,3 +98,117 @@ def test_too_few_points_for_the_parametric_fit_is_a_joint_error_not_a_crash():
                       f_neg=-10 - c, sem=0.1, n_plus=1, n_minus=1) for c in (0.1, 0.5)]
     r = identify_points('joint_1', pts, FitConfig(min_speeds=2))
     assert r.friction is None and 'too few' in r.error
+
+
+def sweep(c, joint=0, n=3, gravity=5.0, t0=0.0):
+    """One eq. 4.1 run at speed c with ideal tracking (as synthetic_series) and its profile."""
+    p = ConstantVelocityProfile.for_speed(c)
+    t = np.arange(0, p.duration, 0.004032)
+    v = np.zeros((len(t), n))
+    v[:, joint] = p.velocity(t)
+    q = np.zeros((len(t), n))
+    q[:, joint] = p.position(t)
+    tau = np.zeros((len(t), n))
+    tau[:, joint] = TRUE.torque(v[:, joint]) + gravity * (1 + q[:, joint])
+    return t + t0, q, v, tau, p
+
+
+def test_stick_slip_signature():
+    from irb_identification.segments import SegmentConfig, stick_slip
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 2.0, 0.004032)
+    c = 0.1
+    assert stick_slip(c + 0.002 * rng.standard_normal(len(t))) is None     # noise only
+    wobble = c + 0.03 * np.sin(2 * np.pi * t / 1.0)
+    assert 'not steady' in stick_slip(wobble)
+    stuck = np.full(len(t), c)
+    stuck[100:103] = 0.0                              # three samples at rest inside the hold
+    assert 'stops inside the hold' in stick_slip(stuck)
+    stuck[101] = c                                   # two isolated samples: a glitch, not a stop
+    assert stick_slip(stuck) is None
+    assert stick_slip(-stuck) is None                # sign-symmetric
+    assert 'stops' in stick_slip(-np.where(np.arange(len(t)) % 40 < 4, 0.0, c))
+    assert stick_slip(stuck, SegmentConfig(stick_samples=1)) is not None
+
+
+def test_stick_slip_hold_is_rejected_reported_and_the_fit_keeps_the_truth(rng):
+    """The +0.1 rad/s hold wobbles slowly (it passes the rolling test) with a torque bias as
+    stick-slip gives; it must be left out, reported, and the fit stay on the truth."""
+    parts, t0, spoiled = [], 0.0, None
+    for c in DEFAULT_SPEEDS:
+        t, q, v, tau, p = sweep(c, t0=t0)
+        if c == 0.1:
+            a, b, _ = p.hold_windows()[0]
+            m = (t - t0 >= a) & (t - t0 <= b)
+            v[m, 0] = c + 0.03 * np.sin(2 * np.pi * (t[m] - t0 - a) / 1.0)
+            tau[m, 0] += 5.0
+            spoiled = (t0 + a, t0 + b)
+        tau[:, 0] += 0.3 * rng.standard_normal(len(t))
+        parts.append(JointSeries(t, ('j0', 'j1', 'j2'), q, v, tau))
+        t0 = t[-1] + 1.0
+    s = JointSeries.concatenate(parts)
+    rejected = []
+    segs = find_segments(s, 0, rejected=rejected)
+    assert len(rejected) == 1
+    r = rejected[0]
+    assert r.joint == 0 and r.speed == pytest.approx(0.1, rel=0.05)
+    assert spoiled[0] < r.t_start < r.t_end < spoiled[1] and 'not steady' in r.reason
+    assert not any(spoiled[0] <= g.t_start <= spoiled[1] for g in segs)
+    res = identify_series([s], ['j0', 'j1', 'j2'], labels=['bag_a'])[0]
+    assert res.error is None
+    assert [(lab, x.reason) for lab, x in res.rejected] == [('bag_a', r.reason)]
+    assert any('1 hold(s) rejected' in w and 'bag_a' in w for w in res.warnings)
+    assert any('only with sign -' in w for w in res.warnings)       # 0.1 rad/s lost its pair
+    assert 0.1 not in [round(p.speed, 3) for p in res.points]
+    assert res.parametric.coulomb == pytest.approx(TRUE.coulomb, rel=0.02)
+    assert res.parametric.viscous == pytest.approx(TRUE.viscous, rel=0.02)
+
+
+def test_recording_gaps_do_not_bias_the_hold_average():
+    """Gravity 50 (1 + q) N m varies by 40 N m over the stroke; a burst of dropped messages in
+    the first half of the +c hold must not move its time average (eq. 4.8 stays exact)."""
+    t, q, v, tau, p = sweep(0.5, gravity=50.0)
+    a, b, _ = p.hold_windows()[0]
+    keep = ~((t >= a + 0.3 * (b - a)) & (t <= a + 0.6 * (b - a)))
+    s = JointSeries(t[keep], ('j0', 'j1', 'j2'), q[keep], v[keep], tau[keep])
+    segs = find_segments(s, 0)
+    plus = [g for g in segs if g.speed > 0][0]
+    # truth: the time average of tau over the segment's span (q linear in t)
+    q_mid = 0.5 * sum(p.position(np.array([plus.t_start, plus.t_end])))
+    assert plus.torque == pytest.approx(float(TRUE.torque(0.5)) + 50 * (1 + q_mid), abs=1e-6)
+    (point,), _ = speed_points(segs)
+    assert point.tau_f == pytest.approx(float(TRUE.torque(0.5)), rel=1e-3)
+
+
+def test_a_sweep_lost_to_chatter_is_reported():
+    t, q, v, tau, _ = sweep(0.06)
+    moving = np.abs(v[:, 0]) > 0.03
+    v[moving, 0] += 0.06 * np.sin(2 * np.pi * 15 * t[moving])    # 15 Hz stick-slip chatter
+    s = JointSeries(t, ('j0', 'j1', 'j2'), q, v, tau)
+    assert find_segments(s, 0) == []
+    res = identify_series([s], ['j0', 'j1', 'j2'], labels=['bag_x'])
+    assert 'no constant-speed segments' in res[0].error
+    assert any('bag_x: j0 moved back and forth on its own' in w for w in res[0].warnings)
+    assert not res[1].warnings                       # joints that never moved: no warning
+
+
+def test_effort_lag_is_referred_to_where_the_torque_acted():
+    """The effort is the torque of the period before each sample: gravity 300 (1 + q) N m
+    then pairs with q - c T/2, which biases eq. 4.8 by 300 c T/2 unless effort_lag_s says so."""
+    from irb_identification.segments import SegmentConfig
+    lag = 0.004032 / 2
+    parts, t0 = [], 0.0
+    for c in (0.2, 1.0):
+        t, q, v, tau, _ = sweep(c, gravity=300.0, t0=t0)
+        tau[:, 0] -= 300.0 * v[:, 0] * lag               # gravity where the torque acted
+        parts.append(JointSeries(t, ('j0', 'j1', 'j2'), q, v, tau))
+        t0 = t[-1] + 1.0
+    s = JointSeries.concatenate(parts)
+    for cfg, ok in ((SegmentConfig(), False), (SegmentConfig(effort_lag_s=lag), True)):
+        points, _ = speed_points(find_segments(s, 0, cfg))
+        for p in points:
+            err = p.tau_f - float(TRUE.torque(p.speed))
+            if ok:
+                assert err == pytest.approx(0.0, abs=1e-3 * p.tau_f)
+            else:
+                assert err == pytest.approx(-300.0 * p.speed * lag, rel=0.02)
