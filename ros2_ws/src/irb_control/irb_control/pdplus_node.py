@@ -57,7 +57,8 @@ class PdPlusNode(Node):
         par('theta_max_lead_rad', d.theta_max_lead_rad, 'progress governor lead [rad]; 0 = '
             'theta from the measurement only (thesis)')
         par('reference_mode', 'theta', "'theta' (theta-driven) or 'time' (q(t))")
-        par('builtin_profile', 'circle', "used until a plan arrives: 'circle' or 'sine'")
+        par('builtin_profile', 'circle', "used until a plan arrives: 'circle', 'sine' or "
+            "'none' (no motion and no command until /planned_trajectory arrives)")
         par('profile_duration_s', 10.0, 'built-in circle: one circle in this time [s]')
         par('min_theta_dot', 0.05, 'floor of h(theta) [rad/s]')
         par('sine_joint', 1, 'built-in sine: joint 1..3')
@@ -141,8 +142,11 @@ class PdPlusNode(Node):
                 self.ctrl.set_time_trajectory(prof)
             else:
                 self.ctrl.set_path_profile(prof)
+        elif P['builtin_profile'] == 'none':
+            self.get_logger().info('no built-in profile: waiting for /planned_trajectory')
+            return
         else:
-            raise ValueError(f"builtin_profile must be 'circle' or 'sine', "
+            raise ValueError(f"builtin_profile must be 'circle', 'sine' or 'none', "
                              f"not {P['builtin_profile']!r}")
         if P['auto_enable']:
             self.ctrl.enable()

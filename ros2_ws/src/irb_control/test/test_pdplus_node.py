@@ -240,3 +240,21 @@ def test_controller_modes_equal_the_message_constants():
     assert (pd_plus.MODE_IDLE, pd_plus.MODE_RAMP, pd_plus.MODE_PATH, pd_plus.MODE_TIME,
             pd_plus.MODE_STOPPED, pd_plus.MODE_HOLD) == (
         cs.MODE_IDLE, cs.MODE_RAMP, cs.MODE_PATH, cs.MODE_TIME, cs.MODE_STOPPED, cs.MODE_HOLD)
+
+
+def test_builtin_profile_none_waits_for_a_plan():
+    """builtin_profile 'none': no profile, no command for joint states, enable refused until a
+    plan arrives."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    try:
+        node = PdPlusNode(context=ctx, namespace=f'/t{uuid.uuid4().hex[:8]}',
+                          parameter_overrides=[Parameter('builtin_profile', value='none')])
+        node.pub_cmd, node.pub_state = _Capture(), _Capture()
+        assert node.ctrl.profile is None
+        node.on_state(joint_state(1.0, node.model.ik(np.array([0.75, 0.0, 0.13]))))
+        assert node.pub_cmd.sent == [] and len(node.pub_state.sent) == 1
+        assert node.ctrl.enable() == (False, 'no profile')
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
