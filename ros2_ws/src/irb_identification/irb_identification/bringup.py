@@ -40,8 +40,8 @@ def main(args=None) -> int:
         print(f'[bringup] {len(specs)} nodes up; Ctrl-C stops them', flush=True)
         while not stop.is_set() and group.poll() is None:
             stop.wait(0.2)
-        print('[bringup] stopping the graph' + (f' ({group.failed} failed)'
-                                                 if group.failed else ''), flush=True)
+        failed = f' ({group.failed} failed)' if group.failed else ''
+        print(f'[bringup] stopping the graph{failed}', flush=True)
     return 1 if group.failed else 0
 
 

@@ -27,6 +27,19 @@ def domain_id() -> int:
     return int(os.environ['ROS_DOMAIN_ID'])
 
 
+@pytest.fixture
+def ctx(domain_id):
+    """A private rclpy context on ``domain_id`` and a SingleThreadedExecutor in it."""
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.executors import SingleThreadedExecutor
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    executor = SingleThreadedExecutor(context=context)
+    yield context, executor
+    executor.shutdown()
+    rclpy.try_shutdown(context=context)
+
+
 def check_bag(path, decode_limit: int = 2000) -> dict:
     """Read a bag with rosbags and with mcap (+ mcap_ros2 decoding), CRCs validated.
 

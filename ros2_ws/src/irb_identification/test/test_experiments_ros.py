@@ -9,7 +9,6 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('irb_interfaces.msg')
 from irb_interfaces.msg import ControllerState  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy)  # noqa: E402
@@ -83,16 +82,6 @@ class FakePdPlus(Node):
         self.pub_js.publish(js)
 
 
-@pytest.fixture
-def graph(domain_id):
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    executor = SingleThreadedExecutor(context=context)
-    yield context, executor
-    executor.shutdown()
-    rclpy.try_shutdown(context=context)
-
-
 def experiments_node(context, tag, root, **extra):
     from irb_identification.experiments import ExperimentsNode
     p = dict(mode='ros', joints=['joint_3'], speeds_rad_s=[1.0, 1.5], hold_max_s=0.6,
@@ -113,8 +102,8 @@ def modes_and_stamps(bag, tag):
     return np.array([h[0] for h in heads]), np.array([h[1] for h in heads]), np.array(js)
 
 
-def test_runs_are_timed_on_the_controller_not_the_wall_clock(graph, tmp_path):
-    context, executor = graph
+def test_runs_are_timed_on_the_controller_not_the_wall_clock(ctx, tmp_path):
+    context, executor = ctx
     tag = uuid.uuid4().hex[:8]
     fake = FakePdPlus(tag, context, busy_s=1.0)
     exp = experiments_node(context, tag, tmp_path)
@@ -139,9 +128,9 @@ def test_runs_are_timed_on_the_controller_not_the_wall_clock(graph, tmp_path):
     fake.destroy_node()
 
 
-def test_a_stop_fails_that_run_clearly_and_the_others_still_run(graph, tmp_path):
+def test_a_stop_fails_that_run_clearly_and_the_others_still_run(ctx, tmp_path):
     from irb_identification.experiments import RunError
-    context, executor = graph
+    context, executor = ctx
     tag = uuid.uuid4().hex[:8]
     fake = FakePdPlus(tag, context, busy_s=0.2, stop_in_run=1)
     exp = experiments_node(context, tag, tmp_path)
@@ -160,9 +149,9 @@ def test_a_stop_fails_that_run_clearly_and_the_others_still_run(graph, tmp_path)
     fake.destroy_node()
 
 
-def test_no_controller_is_a_bounded_error_not_a_hang(graph, tmp_path):
+def test_no_controller_is_a_bounded_error_not_a_hang(ctx, tmp_path):
     from irb_identification.experiments import RunError
-    context, executor = graph
+    context, executor = ctx
     tag = uuid.uuid4().hex[:8]
     exp = experiments_node(context, tag, tmp_path, run_timeout_s=1.0)
     executor.add_node(exp)

@@ -12,21 +12,27 @@ from irb_identification.series import JointSeries
 TRUE = JointFriction(coulomb=10.0, static=14.0, stribeck_velocity=0.06, viscous=8.0)
 
 
+def sweep(c, joint=0, n=3, gravity=5.0, t0=0.0):
+    """One eq. 4.1 run at speed c with ideal tracking (as synthetic_series) and its profile."""
+    p = ConstantVelocityProfile.for_speed(c)
+    t = np.arange(0, p.duration, 0.004032)
+    v = np.zeros((len(t), n))
+    v[:, joint] = p.velocity(t)
+    q = np.zeros((len(t), n))
+    q[:, joint] = p.position(t)
+    tau = np.zeros((len(t), n))
+    tau[:, joint] = TRUE.torque(v[:, joint]) + gravity * (1 + q[:, joint])
+    return t + t0, q, v, tau, p
+
+
 def synthetic_series(speeds, joint=0, n=3, gravity=5.0, noise=0.0, rng=None):
     """Ideal tracking of eq. 4.1: tau = tau_f(v) + gravity * (1 + q) (position dependent)."""
     parts, t0 = [], 0.0
     for c in speeds:
-        p = ConstantVelocityProfile.for_speed(c)
-        t = np.arange(0, p.duration, 0.004032)
-        v = np.zeros((len(t), n))
-        v[:, joint] = p.velocity(t)
-        q = np.zeros((len(t), n))
-        q[:, joint] = p.position(t)
-        tau = np.zeros((len(t), n))
-        tau[:, joint] = TRUE.torque(v[:, joint]) + gravity * (1 + q[:, joint])
+        t, q, v, tau, p = sweep(c, joint, n, gravity, t0)
         if noise:
             tau += noise * rng.standard_normal(tau.shape)
-        parts.append(JointSeries(t + t0, tuple(f'j{k}' for k in range(n)), q, v, tau))
+        parts.append(JointSeries(t, tuple(f'j{k}' for k in range(n)), q, v, tau))
         t0 += p.duration + 1.0
     return JointSeries.concatenate(parts)
 
@@ -85,10 +91,9 @@ def test_identify_synthetic_noisy(rng):
     assert r.error is None, r.error
     assert r.parametric.coulomb == pytest.approx(TRUE.coulomb, rel=0.02)
     assert r.parametric.viscous == pytest.approx(TRUE.viscous, rel=0.02)
-    assert r.friction.valid_range == (0.02, 2.0) or np.allclose(r.friction.valid_range,
-                                                                 (0.02, 2.0), rtol=1e-3)
+    assert r.friction.valid_range == (0.02, 2.0) or np.allclose(
+        r.friction.valid_range, (0.02, 2.0), rtol=1e-3)
     assert len(r.friction.polynomial_positive) == 8
-
 
 
 def test_too_few_points_for_the_parametric_fit_is_a_joint_error_not_a_crash():
@@ -98,19 +103,6 @@ def test_too_few_points_for_the_parametric_fit_is_a_joint_error_not_a_crash():
                       f_neg=-10 - c, sem=0.1, n_plus=1, n_minus=1) for c in (0.1, 0.5)]
     r = identify_points('joint_1', pts, FitConfig(min_speeds=2))
     assert r.friction is None and 'too few' in r.error
-
-
-def sweep(c, joint=0, n=3, gravity=5.0, t0=0.0):
-    """One eq. 4.1 run at speed c with ideal tracking (as synthetic_series) and its profile."""
-    p = ConstantVelocityProfile.for_speed(c)
-    t = np.arange(0, p.duration, 0.004032)
-    v = np.zeros((len(t), n))
-    v[:, joint] = p.velocity(t)
-    q = np.zeros((len(t), n))
-    q[:, joint] = p.position(t)
-    tau = np.zeros((len(t), n))
-    tau[:, joint] = TRUE.torque(v[:, joint]) + gravity * (1 + q[:, joint])
-    return t + t0, q, v, tau, p
 
 
 def test_stick_slip_signature():

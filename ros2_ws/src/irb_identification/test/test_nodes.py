@@ -10,7 +10,6 @@ import pytest
 import yaml
 
 rclpy = pytest.importorskip('rclpy')
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -22,16 +21,6 @@ from irb_identification.series import read_joint_series  # noqa: E402
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
-
-
-@pytest.fixture
-def ctx(domain_id):
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    executor = SingleThreadedExecutor(context=context)
-    yield context, executor
-    executor.shutdown()
-    rclpy.try_shutdown(context=context)
 
 
 def spin_until(executor, cond, timeout=30.0):
@@ -272,8 +261,8 @@ def test_offline_experiment_bags_replayable(tmp_path, model, bag_check):
     assert bag_check(bags[0])['/joint_states'] > 100
 
 
-def test_topic_seen_first_through_a_subscriber_is_recorded_once_published(ctx, tmp_path,
-                                                                         bag_check):
+def test_topic_seen_first_through_a_subscriber_is_recorded_once_published(
+        ctx, tmp_path, bag_check):
     """Only a subscriber exists when the recorder starts; the best-effort publisher comes
     later. The recorder must wait for it and match its QoS (a reliable guess never would)."""
     context, executor = ctx

@@ -28,8 +28,8 @@ def test_codec_matches_rosbags(rng):
 
 def test_codec_mixed_layouts_and_errors():
     ts = bagio.typestore()
-    JS, H, T = (ts.types[k] for k in (JOINT_STATE, 'std_msgs/msg/Header',
-                                       'builtin_interfaces/msg/Time'))
+    JS, H, T = (ts.types[k]
+                for k in (JOINT_STATE, 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time'))
 
     def msg(k, pos, vel, eff, names=('j1', 'j2')):
         return bagio.serialize(JOINT_STATE, JS(

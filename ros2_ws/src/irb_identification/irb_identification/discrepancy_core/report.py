@@ -111,6 +111,7 @@ def markdown(report: dict, files: list[str]) -> str:
         red = report['heldout_reduction']
         lines += [f"Held-out residual reduction in its channel: {100 * red:.0f} %.", '',
                   '| parameter | value | 95 % interval |', '|---|---|---|']
+
         def r(x):
             return [float(f'{v:.4g}') for v in x] if isinstance(x, list) else float(f'{x:.4g}')
         for k, v in report['parameters'].items():
