@@ -179,6 +179,28 @@ class Watchdog:
         return self.last is not None and now - self.last > self.timeout_s
 
 
+class SettleGate:
+    """Has a sample stream been steady for ``settle_s`` [s]? (auto-enable at start-up)
+
+    ``feed(now)`` on every sample's arrival [s, any monotonic clock] returns True once the
+    samples have kept coming without a gap of more than ``max_gap_periods`` periods for at
+    least ``settle_s``; a longer gap starts the count again.
+    """
+
+    def __init__(self, settle_s: float, period_s: float = PERIOD_S,
+                 max_gap_periods: float = 3.0):
+        self.settle_s = max(float(settle_s), 0.0)
+        self.max_gap_s = max_gap_periods * period_s
+        self.since: float | None = None
+        self.last: float | None = None
+
+    def feed(self, now: float) -> bool:
+        if self.last is None or now - self.last > self.max_gap_s:
+            self.since = now
+        self.last = now
+        return now - self.since >= self.settle_s
+
+
 class PdPlusController:
     """The controller state machine; see the module docstring.
 

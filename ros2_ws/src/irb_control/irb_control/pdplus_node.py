@@ -23,7 +23,7 @@ from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
 from .node_util import declare, declare_realtime, latched_qos, spin_with, state_qos
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
-                      ControllerConfig, PdPlusController, Watchdog)
+                      ControllerConfig, PdPlusController, SettleGate, Watchdog)
 from .profiles import ProfileError, default_circle_profile, sine_trajectory
 from .trajectory_io import profile_from_msg
 
@@ -69,7 +69,10 @@ class PdPlusNode(Node):
         par('path_radius', 0.15, 'circle radius [m]')
         par('path_start_angle', 0.0, 'circle start angle [rad]')
         par('path_direction', 1, 'circle direction: +1 counter-clockwise, -1 clockwise')
-        par('auto_enable', True, 'start moving as soon as a profile and joint states exist')
+        par('auto_enable', True, 'start moving once a profile exists, the joint states have '
+            'been steady for auto_enable_settle_s and torque_command has a subscriber')
+        par('auto_enable_settle_s', 0.25, 'auto_enable: joint states without a gap of more than '
+            '3 periods for this long first [s] (real time only; 0 with use_sim_time)')
         par('watchdog_missed_samples', 3, 'safe stop after this many missing samples')
         par('watchdog_sim_time_timeout_s', 1.0, 'minimum watchdog timeout with use_sim_time '
             '(lockstep) [s]')
@@ -101,6 +104,11 @@ class PdPlusNode(Node):
                                  P['watchdog_sim_time_timeout_s'] if sim_time else 0.0)
         self.missed = 0
         self._last_stamp: float | None = None
+        # auto_enable waits for a steady stream and a matched command topic (at start-up DDS
+        # discovery may still be going on: a ramp started then met a 17 ms gap or commands
+        # nobody received, and ended in a safe stop)
+        self._auto_enable_pending = bool(P['auto_enable']) and self.ctrl.profile is not None
+        self._settle = SettleGate(0.0 if sim_time else P['auto_enable_settle_s'], cfg.period_s)
         self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_qos())
         self.pub_state = self.create_publisher(ControllerState, 'controller_state', state_qos())
         self.create_subscription(JointState, 'joint_states', self.on_state_raw, state_qos(),
@@ -148,8 +156,6 @@ class PdPlusNode(Node):
         else:
             raise ValueError(f"builtin_profile must be 'circle', 'sine' or 'none', "
                              f"not {P['builtin_profile']!r}")
-        if P['auto_enable']:
-            self.ctrl.enable()
 
     # --- callbacks -----------------------------------------------------------------------
     def on_state_raw(self, data: bytes) -> None:
@@ -173,6 +179,8 @@ class PdPlusNode(Node):
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
         # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
         stamp = sec + nanosec * 1e-9
+        if self._auto_enable_pending:
+            self._try_auto_enable(t_in)
         was = self.ctrl.mode
         out = self.ctrl.step(stamp, q, qd)
         if out.publish:
@@ -202,6 +210,20 @@ class PdPlusNode(Node):
              out.q_error.tolist(), out.qd_error.tolist(), out.tau_model.tolist(),
              out.tau_friction.tolist(), out.tau_feedback.tolist(), out.tau.tolist()),
             self.missed, self.ctrl.rejected_inputs, dt))
+
+    def _try_auto_enable(self, now: float) -> None:
+        """auto_enable: enable once the joint states have arrived without a gap of more than
+        3 periods for auto_enable_settle_s (SettleGate) and torque_command has a subscriber.
+        ``now``: the sample's arrival [s, perf_counter]."""
+        if not self._settle.feed(now):
+            return
+        if self.pub_cmd.get_subscription_count() == 0:
+            self.get_logger().info('auto_enable: waiting for a subscriber of torque_command',
+                                   throttle_duration_sec=5.0)
+            return
+        self._auto_enable_pending = False
+        ok, text = self.ctrl.enable()
+        self.get_logger().info(f'auto_enable: {text}')
 
     def on_watchdog(self) -> None:
         if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):
@@ -237,9 +259,10 @@ class PdPlusNode(Node):
         self.get_logger().info(f'new profile from planned_trajectory ({len(msg.points)} '
                                f'points, joints {list(msg.joint_names)})')
         if self.P['auto_enable']:
-            self.ctrl.enable()
+            self._auto_enable_pending = True
 
     def on_enable(self, request, response):
+        self._auto_enable_pending = False
         response.success, response.message = self.ctrl.enable()
         if response.success:
             self.watchdog.reset()
@@ -247,6 +270,7 @@ class PdPlusNode(Node):
         return response
 
     def on_stop(self, request, response):
+        self._auto_enable_pending = False          # a stop is never undone automatically
         self.ctrl.stop('stop service')
         self._publish_stopped()
         response.success, response.message = True, 'stopped (latched until enable)'

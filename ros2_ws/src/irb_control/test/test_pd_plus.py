@@ -274,3 +274,21 @@ def test_time_driven_mode(model, circle, profile):
     assert_allclose(out.q_ref, row[:3], atol=1e-4)
     out = ctrl.step(t + traj.duration, q0, np.zeros(3))
     assert out.mode == MODE_HOLD
+
+
+def test_settle_gate_needs_a_steady_stream_for_the_settle_time():
+    from irb_control.pd_plus import SettleGate
+    T = 0.004032
+    gate = SettleGate(0.25, T)
+    times = 100.0 + T * np.arange(200)
+    ready = [gate.feed(t) for t in times]
+    first = ready.index(True)
+    assert not any(ready[:first]) and all(ready[first:])
+    assert times[first] - times[0] >= 0.25 and times[first - 1] - times[0] < 0.25
+    # a gap of more than 3 periods starts the count again; 3 periods do not
+    assert gate.feed(times[-1] + 3.0 * T)
+    t = times[-1] + 3.0 * T + 3.5 * T
+    assert not gate.feed(t)
+    assert not gate.feed(t + 0.2) and not gate.feed(t + 0.2 + 3.2 * T)
+    assert not gate.feed(t + 0.26)          # the gap before restarted the count
+    assert SettleGate(0.0, T).feed(5.0)     # 0: ready on the first sample

@@ -105,6 +105,7 @@ def test_stop_enable_services_and_watchdog(graph):
     ctrl, peer, ex, ns = graph
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
+    Collector(peer, JointState, f'{ns}/torque_command', state_qos())    # auto_enable needs it
     pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
     k = [0]
 
@@ -161,6 +162,9 @@ class _Capture:
     def publish(self, msg):
         self.sent.append(msg)
 
+    def get_subscription_count(self):
+        return 1
+
 
 def test_hot_path_commands_identical_to_the_controller(graph):
     """The serialized path (raw subscription, bytes out) sends exactly the torques of
@@ -176,6 +180,7 @@ def test_hot_path_commands_identical_to_the_controller(graph):
     ref.enable()
     plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
     ctrl.pub_cmd, ctrl.pub_state = _Capture(), _Capture()
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success   # as ref: at once
     modes = set()
     order = [2, 0, 1]
     for k in range(400):
@@ -258,3 +263,26 @@ def test_builtin_profile_none_waits_for_a_plan():
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
+    """No ramp while torque_command has no subscriber (0.6 s of joint states); once one is
+    matched, the ramp starts (the settle time, SettleGate, is tested in test_pd_plus)."""
+    ctrl, peer, ex, ns = graph
+    q0 = ctrl.ctrl.start_pose()
+    states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
+    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
+    k = [0]
+
+    def feed():
+        k[0] += 1
+        pub.publish(joint_state(20.0 + k[0] * T, q0))
+    timer = peer.create_timer(T, feed)
+    spin_for(ex, states.expect(lambda m: len(states.msgs) >= 150))     # 0.6 s of samples
+    assert {m.mode for m in states.msgs} == {ControllerState.MODE_IDLE}
+    Collector(peer, JointState, f'{ns}/torque_command', state_qos())
+    n_idle = len(states.msgs)
+    first = spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
+    peer.destroy_timer(timer)
+    # the stream was steady long before: the ramp starts as soon as the subscriber is matched
+    assert first.mode == ControllerState.MODE_RAMP and len(states.msgs) - n_idle < 124
