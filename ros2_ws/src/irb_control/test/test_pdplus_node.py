@@ -71,6 +71,17 @@ def joint_state(stamp_s, q, qd=(0.0, 0.0, 0.0)):
     return m
 
 
+def feed_joint_states(peer, ns, t0, q):
+    """A timer on ``peer`` publishing joint states at pose q every period, stamped t0 + k T."""
+    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
+    k = [0]
+
+    def feed():
+        k[0] += 1
+        pub.publish(joint_state(t0 + k[0] * T, q))
+    return peer.create_timer(T, feed)
+
+
 def spin_for(ex, fut):
     ex.spin_until_future_complete(fut, timeout_sec=TIMEOUT)
     assert fut.done(), 'event did not happen within the timeout'
@@ -106,13 +117,7 @@ def test_stop_enable_services_and_watchdog(graph):
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
     Collector(peer, JointState, f'{ns}/torque_command', state_qos())    # auto_enable needs it
-    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
-    k = [0]
-
-    def feed():
-        k[0] += 1
-        pub.publish(joint_state(10.0 + k[0] * T, q0))
-    timer = peer.create_timer(T, feed)
+    timer = feed_joint_states(peer, ns, 10.0, q0)
     spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
 
     stop = peer.create_client(Trigger, f'{ns}/pdplus/stop')
@@ -271,13 +276,7 @@ def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
     ctrl, peer, ex, ns = graph
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
-    pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
-    k = [0]
-
-    def feed():
-        k[0] += 1
-        pub.publish(joint_state(20.0 + k[0] * T, q0))
-    timer = peer.create_timer(T, feed)
+    timer = feed_joint_states(peer, ns, 20.0, q0)
     spin_for(ex, states.expect(lambda m: len(states.msgs) >= 150))     # 0.6 s of samples
     assert {m.mode for m in states.msgs} == {ControllerState.MODE_IDLE}
     Collector(peer, JointState, f'{ns}/torque_command', state_qos())
