@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from irb_control.cdr import controller_state_head, header_stamp
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -31,8 +32,7 @@ from .offline_sim import PERIOD_S, SimConfig, simulate, start_pose, write_run_ba
 from .profiles import DEFAULT_SPEEDS, ConstantVelocityProfile, joint_reference
 from .recorder_node import DEFAULT_TOPICS, RecorderNode
 from .rosutil import default_bag_root
-from .run_timing import (FAILED, MODE_NAMES, CdrError, RunMonitor, controller_state_head,
-                         stamp_of)
+from .run_timing import FAILED, MODE_NAMES, RunMonitor
 
 DEFAULT_CENTER = (0.0, 0.5, -0.8)
 """Default pose [rad] the moving joint is centred on. Joints 2 and 3 set joint 1's inertia:
@@ -130,17 +130,9 @@ class ExperimentsNode(Node):
 
     def trajectory(self, j, prof, q0):
         """The run's reference as a JointTrajectory sampled every control period."""
-        from builtin_interfaces.msg import Duration
-        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+        from irb_control.trajectory_io import joint_trajectory_msg
         t = np.arange(0.0, prof.duration + 1e-9, PERIOD_S)
-        q, qd, qdd = joint_reference(prof, j, q0, t)
-        msg = JointTrajectory(joint_names=list(self.model.joint_names))
-        for k in range(len(t)):
-            sec, nsec = divmod(int(round(t[k] * 1e9)), 1_000_000_000)
-            msg.points.append(JointTrajectoryPoint(
-                positions=q[k].tolist(), velocities=qd[k].tolist(),
-                accelerations=qdd[k].tolist(), time_from_start=Duration(sec=sec, nanosec=nsec)))
-        return msg
+        return joint_trajectory_msg(self.model.joint_names, t, *joint_reference(prof, j, q0, t))
 
     def run_ros(self, executor) -> list[Path]:
         """Every run through pdplus; RunError after all runs if any failed (the others'
@@ -206,13 +198,13 @@ class ExperimentsNode(Node):
         def on_state(data):
             try:
                 mon.on_state(*controller_state_head(data))
-            except CdrError as exc:
+            except ValueError as exc:
                 mon.fail(f'unreadable controller state: {exc}')
 
         def on_joint_state(data):
             try:
-                mon.on_recorded(stamp_of(data))
-            except CdrError as exc:
+                mon.on_recorded(header_stamp(data))
+            except ValueError as exc:
                 mon.fail(f'unreadable joint state: {exc}')
         traj = self.trajectory(j, prof, q0)
         rec = RecorderNode(node_name='experiments_recorder', context=self.context,

@@ -15,14 +15,11 @@ pdplus still reports HOLD of the previous run (or runs something else). The call
 pdplus is not moving before it publishes (``is_moving``), so the motion that starts next is the
 run's own. All times are the graph's (simulated) time from message stamps, so a slow machine
 changes how long a run takes on the wall clock but not what is recorded.
-
-``stamp_of`` / ``controller_state_head`` read the header stamp (and mode, stop reason) straight
-from serialized CDR (XCDR1: 4-byte encapsulation header, then std_msgs/Header = int32 sec,
-uint32 nanosec, string frame_id), as the recorder hands them over, without message objects.
+The callers read stamps and modes from the recorder's serialized messages with
+``irb_control.cdr.header_stamp`` / ``controller_state_head``.
 """
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 
 # ControllerState modes: pdplus's (equal to the constants of irb_interfaces/msg/ControllerState)
@@ -30,41 +27,6 @@ from irb_control.pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MO
                                  MODE_TIME)
 
 MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
-
-_STAMP = struct.Struct('<iI')
-_U32 = struct.Struct('<I')
-_BODY = 4                          # encapsulation header bytes
-
-
-class CdrError(ValueError):
-    """A serialized message is too short or not little-endian CDR."""
-
-
-def stamp_of(data: bytes) -> float:
-    """Header stamp [s] of a serialized message whose first field is a std_msgs/Header."""
-    if len(data) < _BODY + 8:
-        raise CdrError(f'{len(data)} bytes are too few for a header')
-    if data[1] != 1:
-        raise CdrError('only little-endian CDR is read here')
-    sec, nanosec = _STAMP.unpack_from(data, _BODY)
-    return sec + nanosec * 1e-9
-
-
-def controller_state_head(data: bytes) -> tuple[float, int, str]:
-    """(stamp [s], mode, stop_reason) of a serialized irb_interfaces/msg/ControllerState."""
-    stamp = stamp_of(data)
-    try:
-        (n,) = _U32.unpack_from(data, _BODY + 8)              # frame_id length incl. NUL
-        pos = _BODY + 12 + n
-        mode = data[pos]
-        pos += 1
-        pos += (-(pos - _BODY)) % 4                           # align the string length to 4
-        (m,) = _U32.unpack_from(data, pos)
-        reason = data[pos + 4:pos + 4 + max(m - 1, 0)].decode('utf-8', 'replace')
-    except (struct.error, IndexError) as exc:
-        raise CdrError(f'truncated ControllerState ({len(data)} bytes)') from exc
-    return stamp, int(mode), reason
-
 
 # run phases
 READY = 'ready'

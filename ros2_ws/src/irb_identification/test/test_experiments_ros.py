@@ -17,7 +17,7 @@ from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from irb_identification import bagio  # noqa: E402
 from irb_control.pd_plus import MODE_HOLD, MODE_RAMP, MODE_STOPPED, MODE_TIME  # noqa: E402
-from irb_identification.run_timing import controller_state_head  # noqa: E402
+from irb_control.cdr import controller_state_head, header_stamp  # noqa: E402
 
 pytestmark = pytest.mark.ros
 T = 0.004032
@@ -97,8 +97,7 @@ def experiments_node(context, tag, root, **extra):
 def modes_and_stamps(bag, tag):
     msgs = bagio.read_messages(bag, [f'/cs_{tag}', f'/js_{tag}'])
     heads = [controller_state_head(d) for d in msgs[f'/cs_{tag}'].data]
-    from irb_identification.run_timing import stamp_of
-    js = [stamp_of(d) for d in msgs[f'/js_{tag}'].data]
+    js = [header_stamp(d) for d in msgs[f'/js_{tag}'].data]
     return np.array([h[0] for h in heads]), np.array([h[1] for h in heads]), np.array(js)
 
 

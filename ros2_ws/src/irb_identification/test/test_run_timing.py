@@ -1,9 +1,8 @@
-"""run_timing: the run monitor's state machine and the CDR header reads (pure, no graph)."""
+"""run_timing: the run monitor's state machine (pure, no graph)."""
 import pytest
 
 from irb_control.pd_plus import MODE_HOLD, MODE_IDLE, MODE_RAMP, MODE_STOPPED, MODE_TIME
 
-from irb_identification import run_timing as rt
 from irb_identification.run_timing import (DONE, FAILED, MARGIN, RUNNING, WAIT_START,
                                            RunMonitor)
 
@@ -17,30 +16,6 @@ def feed(mon, t0, t1, mode, reason=''):
         mon.on_state(t0 + k * T, mode, reason)
         k += 1
     return t0 + k * T
-
-
-def test_cdr_heads_match_rclpy_serialization():
-    serialization = pytest.importorskip('rclpy.serialization')
-    msg = pytest.importorskip('irb_interfaces.msg')
-    from sensor_msgs.msg import JointState
-    for frame, reason in (('', ''), ('base_link', 'tracking error 0.06 rad > 0.05'),
-                          ('abc', 'x')):
-        m = msg.ControllerState()
-        m.header.stamp.sec, m.header.stamp.nanosec = 123, 456_000_000
-        m.header.frame_id = frame
-        m.mode = MODE_STOPPED
-        m.stop_reason = reason
-        m.q_ref = [1.0, 2.0, 3.0]
-        data = serialization.serialize_message(m)
-        assert rt.controller_state_head(data) == (pytest.approx(123.456), MODE_STOPPED, reason)
-    js = JointState()
-    js.header.stamp.sec, js.header.stamp.nanosec = 7, 4_032_000
-    js.name = ['joint_1']
-    assert rt.stamp_of(serialization.serialize_message(js)) == pytest.approx(7.004032)
-    with pytest.raises(rt.CdrError):
-        rt.stamp_of(b'\x00\x01\x00\x00\x01')
-    with pytest.raises(rt.CdrError):
-        rt.controller_state_head(serialization.serialize_message(m)[:14])
 
 
 def test_a_run_ends_after_hold_plus_the_recorded_margin():
