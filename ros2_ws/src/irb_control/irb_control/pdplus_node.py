@@ -222,8 +222,7 @@ class PdPlusNode(Node):
                                    throttle_duration_sec=5.0)
             return
         self._auto_enable_pending = False
-        ok, text = self.ctrl.enable()
-        self.get_logger().info(f'auto_enable: {text}')
+        self.get_logger().info(f'auto_enable: {self.ctrl.enable()[1]}')
 
     def on_watchdog(self) -> None:
         if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):

@@ -266,6 +266,15 @@ class Planner:
             joint_names=list(self.model.joint_names), request=req, fourier_coeffs=coeffs,
             notes=notes)
 
+    def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
+        """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the
+        dynamics and limits ``plan`` checked it with (e.g. its energy at a finer rate)."""
+        req = result.request
+        fm = self.friction_map(req.friction_map)
+        path = CirclePath(req.center, req.radius, req.start_angle, req.direction)
+        return evaluate(result.profile, self.sample_path(path), self.torque(fm),
+                        self._limits(req, fm)[1], rate_hz)
+
     def node_samples(self, result: PlanResult) -> dict:
         """The plan at its theta nodes for the controller: t (N,) [s]; q, qd, qdd, tau (N, n)
         (tau by the evaluator's dynamics, theta_ddot at a node = mean of its intervals)."""

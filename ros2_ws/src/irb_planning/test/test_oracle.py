@@ -62,6 +62,15 @@ def test_grid_convergence_near_the_time_optimum(planner, t_min):
     assert abs(coarse.energy / fine.energy - 1) < 0.005
 
 
+def test_re_evaluation_at_another_rate(planner, t_min):
+    res = planner.plan(PlanRequest(duration=1.5 * t_min))
+    same = planner.evaluate(res, planner.settings.evaluation_rate_hz)
+    assert same.energy == res.evaluation.energy and same.violations == []
+    fine = planner.evaluate(res, 10_000.0)
+    assert fine.t.size > 9 * res.evaluation.t.size
+    assert fine.energy == pytest.approx(res.evaluation.energy, rel=2e-3)
+
+
 def test_trapezoid_result_is_the_evaluator_energy(planner, model):
     res = planner.plan(PlanRequest(objective='trapezoid', duration=4.0))
     ev = evaluate(trapezoid_profile(4.0), lambda th: planner.sample_path(thesis_circle())(th),
