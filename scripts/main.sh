@@ -12,4 +12,4 @@ set -u
 export MPLBACKEND=Agg
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 ros2 run irb_description model_check
-exec ros2 run irb_identification thesis_run "$@"
+exec ros2 run irb_bringup thesis_run "$@"

@@ -109,11 +109,23 @@ if [ "$MODE" = wheels ]; then
 fi
 log "colcon build (ros2_ws)"
 cd "$ROOT/ros2_ws"
-if ! colcon build --symlink-install --event-handlers console_cohesion- summary+ \
-     --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF \
-     > "$ROOT/ros2_ws/build.log" 2>&1; then
-  tail -n 40 "$ROOT/ros2_ws/build.log" >&2
-  die "colcon build failed (full log: ros2_ws/build.log)"
+build() {
+  colcon build --symlink-install --event-handlers console_cohesion- summary+ \
+    --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF > "$ROOT/ros2_ws/build.log" 2>&1
+}
+if ! build; then
+  # A symlink-install build keeps the file lists of earlier checkouts (a file moved to another
+  # package makes the next build fail on a missing copy): once, rebuild the failed packages
+  # from scratch.
+  mapfile -t failed < <(sed -nE 's/^Failed +<<< ([A-Za-z0-9_]+).*/\1/p' "$ROOT/ros2_ws/build.log")
+  [ "${#failed[@]}" -gt 0 ] || { tail -n 40 "$ROOT/ros2_ws/build.log" >&2;
+    die "colcon build failed (full log: ros2_ws/build.log)"; }
+  log "build of ${failed[*]} failed; rebuilding them from scratch once"
+  for p in "${failed[@]}"; do rm -rf "build/$p" "install/$p"; done
+  if ! build; then
+    tail -n 40 "$ROOT/ros2_ws/build.log" >&2
+    die "colcon build failed (full log: ros2_ws/build.log)"
+  fi
 fi
 grep -E "^Summary" "$ROOT/ros2_ws/build.log" | sed "s/^/[setup] /"
 log "done; run 'source scripts/env.sh' for a shell with the workspace sourced"

@@ -12,7 +12,6 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'README.md']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
-        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -25,8 +24,6 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'thesis_run = irb_identification.thesis_run:main',
-            'bringup = irb_identification.bringup:main',
             'recorder = irb_identification.recorder_node:main',
             'replay = irb_identification.replay_node:main',
             'identify = irb_identification.identify:main',

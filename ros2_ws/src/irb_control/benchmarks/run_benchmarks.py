@@ -79,7 +79,8 @@ def _loop_run(duration: float, rt_priority: int) -> dict:
     import rclpy
     from irb_interfaces.msg import ControllerState
 
-    from irb_control.node_util import make_executor, state_qos
+    from irb_control.node_util import make_executor
+    from irb_description.node_main import state_qos
     ns = f'/bench{os.getpid()}'
     stats_path = RESULTS / 'loop_simulator_stats.json'
     RESULTS.mkdir(parents=True, exist_ok=True)

@@ -14,14 +14,14 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
-from irb_description.node_main import run_node
+from irb_description.node_main import declare, run_node, state_qos
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES
-from .node_util import declare, declare_realtime, spin_with, state_qos
+from .node_util import declare_realtime, spin_with
 
 
 class AxisBridge(Node):

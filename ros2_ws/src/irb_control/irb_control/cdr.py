@@ -195,33 +195,6 @@ class JointStateDecoder:
         return sec, nanosec, self._names, seqs[0], seqs[1], seqs[2]
 
 
-def header_stamp(data: bytes) -> float:
-    """Header stamp [s] of a serialized message whose first field is a std_msgs/Header.
-    ValueError when the data is too short or not plain CDR."""
-    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
-        raise ValueError(f'not a serialized message with a header ({len(data)} bytes)')
-    sec, nanosec = struct.unpack_from('<iI' if data[1] else '>iI', data, 4)
-    return sec + nanosec * 1e-9
-
-
-def controller_state_head(data: bytes) -> tuple[float, int, str]:
-    """(stamp [s], mode, stop_reason) of a serialized irb_interfaces/ControllerState, without
-    reading its arrays. ValueError when it is truncated or not plain CDR."""
-    stamp = header_stamp(data)
-    u32 = struct.Struct('<I' if data[1] else '>I').unpack_from
-    try:
-        (n,) = u32(data, 12)                        # frame_id length incl. NUL
-        o = 12 + n                                  # payload offset of the mode (uint8)
-        mode = data[4 + o]
-        o += 1
-        o += -o % 4                                 # stop_reason length, aligned to 4
-        (m,) = u32(data, 4 + o)
-        reason = data[4 + o + 4:4 + o + 4 + max(m - 1, 0)].decode('utf-8', 'replace')
-    except (struct.error, IndexError) as exc:
-        raise ValueError(f'truncated ControllerState ({len(data)} bytes)') from exc
-    return stamp, int(mode), reason
-
-
 class ControllerStateEncoder:
     """irb_interfaces/ControllerState: ``encode(sec, nanosec, mode, stop_reason, theta,
     theta_predicted, theta_dot_ref, arrays, missed_deadlines, rejected_inputs,

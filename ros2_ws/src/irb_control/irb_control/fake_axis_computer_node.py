@@ -18,11 +18,10 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from irb_description.model import RobotModel
-from irb_description.node_main import run_node
+from irb_description.node_main import declare, run_node
 from rclpy.node import Node
 
 from .fake_axis_core import FAULT_KINDS, FakeAxisCore, FaultConfig
-from .node_util import declare
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
 
 

@@ -1,36 +1,15 @@
-"""Small helpers shared by the node files (parameters with descriptions, QoS)."""
+"""Helpers of the loop nodes: realtime scheduling, executors, spin (declare, QoS and
+spin_until_signal live in irb_description.node_main, shared by every node package)."""
 from __future__ import annotations
 
 import os
-import signal
 import threading
 
-import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
-
-def declare(node: Node, name: str, default, description: str):
-    """Declare a parameter with a description (units in brackets) and return its value."""
-    return node.declare_parameter(name, default, ParameterDescriptor(
-        description=description)).value
-
-
-def state_qos() -> QoSProfile:
-    """248 Hz state and command topics: best effort, keep last 1."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.VOLATILE)
-
-
-def latched_qos() -> QoSProfile:
-    """Plans: reliable, transient local, keep last 1 (late joiners get the last plan)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from irb_description.node_main import declare, spin_until_signal
 
 
 def declare_realtime(node: Node) -> tuple[int, list[int]]:
@@ -114,24 +93,6 @@ def make_executor(kind: str, context=None):
         except ImportError:
             pass
     return SingleThreadedExecutor(context=context)
-
-
-def spin_until_signal(executor, timeout_sec: float = 0.1) -> None:
-    """spin_once loop that ends on SIGINT/SIGTERM *between* callbacks.
-
-    A KeyboardInterrupt raised inside a callback is caught and logged by the executor as a
-    failure; here the signal only sets a flag, so the node shuts down cleanly. Also the way
-    to drive an EventsExecutor (its spin() ignores SIGTERM).
-    """
-    stop = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: stop.set())
-                for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        while rclpy.ok() and not stop.is_set():
-            executor.spin_once(timeout_sec=timeout_sec)
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
 
 
 def spin_with(executor_kind: str, realtime: tuple[int, list[int]] = (0, [])):

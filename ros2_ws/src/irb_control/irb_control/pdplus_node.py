@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.node_main import run_node
+from irb_description.node_main import declare, latched_qos, run_node, state_qos
 from irb_description.path import CirclePath
 from irb_interfaces.msg import ControllerState
 from rclpy.clock import Clock, ClockType
@@ -21,7 +21,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import declare, declare_realtime, latched_qos, spin_with, state_qos
+from .node_util import declare_realtime, spin_with
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
                       ControllerConfig, PdPlusController, SettleGate, Watchdog)
 from .profiles import ProfileError, default_circle_profile, sine_trajectory

@@ -15,7 +15,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from irb_description.node_main import run_node
+from irb_description.node_main import declare, run_node, state_qos
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -23,7 +23,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from .cdr import JointStateDecoder, JointStateEncoder
-from .node_util import apply_realtime, declare, declare_realtime, make_executor, state_qos
+from .node_util import apply_realtime, declare_realtime, make_executor
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
 from .plant_effects import load_plant_effects
 

@@ -90,15 +90,3 @@ def theta_profile_msg(t: np.ndarray, theta: np.ndarray, theta_dot: np.ndarray,
         p.time_from_start.sec, p.time_from_start.nanosec = sec_nanosec(float(ti))
         msg.points.append(p)
     return msg
-
-
-def joint_trajectory_msg(names: list[str], t: np.ndarray, q: np.ndarray, qd: np.ndarray,
-                         qdd: np.ndarray) -> JointTrajectory:
-    """A joint trajectory (N,) / (N, 3) as JointTrajectory."""
-    msg = JointTrajectory(joint_names=list(names))
-    for k, ti in enumerate(t):
-        p = JointTrajectoryPoint(positions=q[k].tolist(), velocities=qd[k].tolist(),
-                                 accelerations=qdd[k].tolist())
-        p.time_from_start.sec, p.time_from_start.nanosec = sec_nanosec(float(ti))
-        msg.points.append(p)
-    return msg

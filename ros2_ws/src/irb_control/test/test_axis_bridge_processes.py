@@ -20,7 +20,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from irb_control.node_util import state_qos  # noqa: E402
+from irb_description.node_main import state_qos  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

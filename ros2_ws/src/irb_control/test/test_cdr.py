@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 
 from irb_control.cdr import (CONTROLLER_STATE, JOINT_STATE, ControllerStateEncoder,
-                             JointStateDecoder, JointStateEncoder, _layout,
-                             controller_state_head, header_stamp)
-from irb_control.pd_plus import MODE_STOPPED
+                             JointStateDecoder, JointStateEncoder, _layout)
 
 serialization = pytest.importorskip('rclpy.serialization')
 from irb_interfaces.msg import ControllerState  # noqa: E402
@@ -120,24 +118,3 @@ def test_layout_rejects_unknown_types():
     with pytest.raises(ValueError):
         _layout(('f32',), ())
     assert _layout(CONTROLLER_STATE, (0, 0) + (3,) * 9).size > 0
-
-
-def test_header_reads_match_rclpy_serialization():
-    for frame, reason in (('', ''), ('base_link', 'tracking error 0.06 rad > 0.05'),
-                          ('abc', 'x')):
-        m = ControllerState()
-        m.header.stamp.sec, m.header.stamp.nanosec = 123, 456_000_000
-        m.header.frame_id = frame
-        m.mode = MODE_STOPPED
-        m.stop_reason = reason
-        m.q_ref = [1.0, 2.0, 3.0]
-        data = serialization.serialize_message(m)
-        assert controller_state_head(data) == (pytest.approx(123.456), MODE_STOPPED, reason)
-    js = JointState()
-    js.header.stamp.sec, js.header.stamp.nanosec = 7, 4_032_000
-    js.name = ['joint_1']
-    assert header_stamp(serialization.serialize_message(js)) == pytest.approx(7.004032)
-    with pytest.raises(ValueError):
-        header_stamp(b'\x00\x01\x00\x00\x01')
-    with pytest.raises(ValueError):
-        controller_state_head(serialization.serialize_message(m)[:14])

@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from irb_control import pd_plus  # noqa: E402
-from irb_control.node_util import latched_qos, state_qos  # noqa: E402
+from irb_description.node_main import latched_qos, state_qos  # noqa: E402
 from irb_control.pdplus_node import PdPlusNode  # noqa: E402
 from irb_control.trajectory_io import theta_profile_msg  # noqa: E402
 from irb_control.profiles import polynomial_theta_of_time  # noqa: E402

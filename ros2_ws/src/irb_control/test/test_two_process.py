@@ -17,7 +17,7 @@ from rclpy.qos import QoSProfile  # noqa: E402
 from rclpy.task import Future  # noqa: E402
 
 from irb_control.closed_loop import circle_distance  # noqa: E402
-from irb_control.node_util import state_qos  # noqa: E402
+from irb_description.node_main import state_qos  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

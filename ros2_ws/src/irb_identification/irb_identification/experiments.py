@@ -22,17 +22,18 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from irb_control.cdr import controller_state_head, header_stamp
+from irb_description.stamps import sec_nanosec
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .offline_sim import PERIOD_S, SimConfig, simulate, start_pose, write_run_bag
 from .profiles import DEFAULT_SPEEDS, ConstantVelocityProfile, joint_reference
 from .recorder_node import DEFAULT_TOPICS, RecorderNode
 from .rosutil import default_bag_root
-from .run_timing import FAILED, MODE_NAMES, RunMonitor
+from .run_timing import FAILED, MODE_NAMES, RunMonitor, controller_state_head, header_stamp
 
 DEFAULT_CENTER = (0.0, 0.5, -0.8)
 """Default pose [rad] the moving joint is centred on. Joints 2 and 3 set joint 1's inertia:
@@ -41,6 +42,18 @@ the thesis circle (about 22), and joint 1 then oscillates at about 15 Hz under P
 friction feed-forward (3-sample delay) - stick-slip below the Stribeck speed. Here it is
 19 kg m^2, and the sweeps of joints 2 and 3 (up to 2 rad/s, +-0.85 rad) stay inside the
 limits with the flange at least 0.2 m above the base plane."""
+
+
+def joint_trajectory_msg(names: list[str], t: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                         qdd: np.ndarray) -> JointTrajectory:
+    """A joint trajectory (N,) / (N, 3) as JointTrajectory."""
+    msg = JointTrajectory(joint_names=list(names))
+    for k, ti in enumerate(t):
+        p = JointTrajectoryPoint(positions=q[k].tolist(), velocities=qd[k].tolist(),
+                                 accelerations=qdd[k].tolist())
+        p.time_from_start.sec, p.time_from_start.nanosec = sec_nanosec(float(ti))
+        msg.points.append(p)
+    return msg
 
 
 class RunError(RuntimeError):
@@ -130,14 +143,12 @@ class ExperimentsNode(Node):
 
     def trajectory(self, j, prof, q0):
         """The run's reference as a JointTrajectory sampled every control period."""
-        from irb_control.trajectory_io import joint_trajectory_msg
         t = np.arange(0.0, prof.duration + 1e-9, PERIOD_S)
         return joint_trajectory_msg(self.model.joint_names, t, *joint_reference(prof, j, q0, t))
 
     def run_ros(self, executor) -> list[Path]:
         """Every run through pdplus; RunError after all runs if any failed (the others'
         bags are kept), at once if a run hits the wall-clock bound."""
-        from trajectory_msgs.msg import JointTrajectory
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         pub = self.create_publisher(JointTrajectory, self.topic, QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -168,7 +179,7 @@ class ExperimentsNode(Node):
     def _wait_controller_idle(self, executor) -> None:
         """Before the first run: wait until pdplus reports a state and is not moving (it may
         still run its built-in profile, which would refuse the first trajectory)."""
-        from irb_control.node_util import state_qos
+        from irb_description.node_main import state_qos
         from irb_interfaces.msg import ControllerState
         mon = RunMonitor()
         seen = []

@@ -10,7 +10,7 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
-from irb_control.node_util import spin_until_signal
+from irb_description.node_main import spin_until_signal
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node

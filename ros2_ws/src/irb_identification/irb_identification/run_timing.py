@@ -16,15 +16,18 @@ pdplus is not moving before it publishes (``is_moving``), so the motion that sta
 run's own. All times are the graph's (simulated) time from message stamps, so a slow machine
 changes how long a run takes on the wall clock but not what is recorded.
 The callers read stamps and modes from the recorder's serialized messages with
-``irb_control.cdr.header_stamp`` / ``controller_state_head``.
+``header_stamp`` / ``controller_state_head`` below (plain CDR reads, no message types).
 """
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
-# ControllerState modes: pdplus's (equal to the constants of irb_interfaces/msg/ControllerState)
-from irb_control.pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED,
-                                 MODE_TIME)
+# ControllerState modes: the constants of irb_interfaces/msg/ControllerState, the contract
+# pdplus publishes (test_run_timing checks them against the generated message class)
+MODE_IDLE, MODE_RAMP, MODE_PATH, MODE_TIME, MODE_STOPPED, MODE_HOLD = range(6)
+MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME: 'time',
+              MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
 
 MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
 
@@ -129,3 +132,30 @@ class RunMonitor:
     def _check_margin(self) -> None:
         if self.t_recorded is not None and self.t_recorded >= self.t_end:
             self.phase = DONE
+
+
+def header_stamp(data: bytes) -> float:
+    """Header stamp [s] of a serialized message whose first field is a std_msgs/Header.
+    ValueError when the data is too short or not plain CDR."""
+    if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
+        raise ValueError(f'not a serialized message with a header ({len(data)} bytes)')
+    sec, nanosec = struct.unpack_from('<iI' if data[1] else '>iI', data, 4)
+    return sec + nanosec * 1e-9
+
+
+def controller_state_head(data: bytes) -> tuple[float, int, str]:
+    """(stamp [s], mode, stop_reason) of a serialized irb_interfaces/ControllerState, without
+    reading its arrays. ValueError when it is truncated or not plain CDR."""
+    stamp = header_stamp(data)
+    u32 = struct.Struct('<I' if data[1] else '>I').unpack_from
+    try:
+        (n,) = u32(data, 12)                        # frame_id length incl. NUL
+        o = 12 + n                                  # payload offset of the mode (uint8)
+        mode = data[4 + o]
+        o += 1
+        o += -o % 4                                 # stop_reason length, aligned to 4
+        (m,) = u32(data, 4 + o)
+        reason = data[4 + o + 4:4 + o + 4 + max(m - 1, 0)].decode('utf-8', 'replace')
+    except (struct.error, IndexError) as exc:
+        raise ValueError(f'truncated ControllerState ({len(data)} bytes)') from exc
+    return stamp, int(mode), reason

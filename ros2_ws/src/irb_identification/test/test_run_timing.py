@@ -1,10 +1,10 @@
 """run_timing: the run monitor's state machine (pure, no graph)."""
 import pytest
 
-from irb_control.pd_plus import MODE_HOLD, MODE_IDLE, MODE_RAMP, MODE_STOPPED, MODE_TIME
-
-from irb_identification.run_timing import (DONE, FAILED, MARGIN, RUNNING, WAIT_START,
-                                           RunMonitor)
+from irb_identification.run_timing import (DONE, FAILED, MARGIN, MODE_HOLD, MODE_IDLE,
+                                           MODE_NAMES, MODE_RAMP, MODE_STOPPED, MODE_TIME,
+                                           RUNNING, WAIT_START, RunMonitor,
+                                           controller_state_head, header_stamp)
 
 T = 0.004032
 
@@ -101,3 +101,33 @@ def test_is_moving_before_any_state_and_while_a_motion_runs():
     assert mon.is_moving
     mon.on_state(0.1, MODE_HOLD)
     assert not mon.is_moving
+
+
+def test_modes_are_the_controller_state_contract():
+    msg = pytest.importorskip('irb_interfaces.msg')
+    for mode, name in MODE_NAMES.items():
+        assert getattr(msg.ControllerState, f'MODE_{name.upper()}') == mode
+
+
+def test_header_reads_match_rclpy_serialization():
+    serialization = pytest.importorskip('rclpy.serialization')
+    from irb_interfaces.msg import ControllerState
+    from sensor_msgs.msg import JointState
+    for frame, reason in (('', ''), ('base_link', 'tracking error 0.06 rad > 0.05'),
+                          ('abc', 'x')):
+        m = ControllerState()
+        m.header.stamp.sec, m.header.stamp.nanosec = 123, 456_000_000
+        m.header.frame_id = frame
+        m.mode = MODE_STOPPED
+        m.stop_reason = reason
+        m.q_ref = [1.0, 2.0, 3.0]
+        data = serialization.serialize_message(m)
+        assert controller_state_head(data) == (pytest.approx(123.456), MODE_STOPPED, reason)
+    js = JointState()
+    js.header.stamp.sec, js.header.stamp.nanosec = 7, 4_032_000
+    js.name = ['joint_1']
+    assert header_stamp(serialization.serialize_message(js)) == pytest.approx(7.004032)
+    with pytest.raises(ValueError):
+        header_stamp(b'\x00\x01\x00\x00\x01')
+    with pytest.raises(ValueError):
+        controller_state_head(serialization.serialize_message(m)[:14])

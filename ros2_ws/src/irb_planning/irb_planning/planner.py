@@ -191,7 +191,7 @@ class Planner:
         """Convex lower bound [J] at ``duration`` for the request's path/grid/limits."""
         req = validate(req, self.settings.grid_size)
         fm = self.friction_map(req.friction_map)
-        path = CirclePath(req.center, req.radius, req.start_angle, req.direction)
+        path = request_path(req)
         entry = self._entry(req, path, fm)
         base, _ = self._limits(req, fm)
         with entry.lock:
@@ -210,10 +210,7 @@ class Planner:
         s = self.settings
         req = validate(request, s.grid_size)
         fm = self.friction_map(req.friction_map)
-        try:
-            path = CirclePath(req.center, req.radius, req.start_angle, req.direction)
-        except ValueError as exc:
-            raise PlanError(ERROR_INVALID_REQUEST, str(exc)) from exc
+        path = request_path(req)
         entry = self._entry(req, path, fm)
         base, checked = self._limits(req, fm)
         sample = self.sample_path(path)
@@ -271,22 +268,28 @@ class Planner:
         dynamics and limits ``plan`` checked it with (e.g. its energy at a finer rate)."""
         req = result.request
         fm = self.friction_map(req.friction_map)
-        path = CirclePath(req.center, req.radius, req.start_angle, req.direction)
-        return evaluate(result.profile, self.sample_path(path), self.torque(fm),
+        return evaluate(result.profile, self.sample_path(request_path(req)), self.torque(fm),
                         self._limits(req, fm)[1], rate_hz)
 
     def node_samples(self, result: PlanResult) -> dict:
         """The plan at its theta nodes for the controller: t (N,) [s]; q, qd, qdd, tau (N, n)
         (tau by the evaluator's dynamics, theta_ddot at a node = mean of its intervals)."""
         req, pr = result.request, result.profile
-        path = CirclePath(req.center, req.radius, req.start_angle, req.direction)
-        jp = self.sample_path(path)(pr.theta)
+        jp = self.sample_path(request_path(req))(pr.theta)
         td, tdd = pr.theta_dot[:, None], pr.theta_ddot_nodes[:, None]
         qd = jp.dq * td
         qdd = jp.ddq * td ** 2 + jp.dq * tdd
         torque = self.torque(self.friction_map(req.friction_map))
         tau = np.array([torque(jp.q[k], qd[k], qdd[k]) for k in range(pr.theta.size)])
         return {'t': pr.times, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}
+
+
+def request_path(req: PlanRequest) -> CirclePath:
+    """The geometric path of a (validated) request: the one place a request becomes a path."""
+    try:
+        return CirclePath(req.center, req.radius, req.start_angle, req.direction)
+    except ValueError as exc:
+        raise PlanError(ERROR_INVALID_REQUEST, str(exc)) from exc
 
 
 def request_error_code(exc: Exception) -> int:

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 from irb_control.pd_plus import MODE_PATH
 
-from .bagio import read_messages, typestore
-from .series import read_joint_series
+from irb_identification.bagio import read_messages, typestore
+from irb_identification.series import read_joint_series
 
 CONTROLLER_STATE = 'irb_interfaces/msg/ControllerState'
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from irb_identification.graph_spec import load_graph
+from irb_bringup.graph_spec import load_graph
 
 PKG = Path(__file__).resolve().parent.parent
 
@@ -20,7 +20,7 @@ def test_default_graph_file_lists_the_thesis_nodes():
 
 def test_launch_file_reads_the_same_graph():
     text = (PKG / 'launch' / 'irb_graph.launch.py').read_text()
-    assert 'from irb_identification.graph_spec import load_graph' in text
+    assert 'from irb_bringup.graph_spec import load_graph' in text
     assert "'bringup.yaml'" in text
 
 
@@ -57,7 +57,7 @@ class Output:
 
 
 def start(config):
-    return subprocess.Popen(['ros2', 'run', 'irb_identification', 'bringup', '--config',
+    return subprocess.Popen(['ros2', 'run', 'irb_bringup', 'bringup', '--config',
                              str(config)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, start_new_session=True,
                             env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'))

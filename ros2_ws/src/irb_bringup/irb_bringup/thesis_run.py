@@ -1,4 +1,4 @@
-"""`ros2 run irb_identification thesis_run [--quick]`: the thesis's story in one command.
+"""`ros2 run irb_bringup thesis_run [--quick]`: the thesis's story in one command.
 
 On the simulator, each phase a node graph of separate processes (irb_control.process_group):
 1. identification sweeps (eq. 4.1) through pdplus in time-driven mode, one bag per run;
@@ -73,7 +73,7 @@ class Link:
 
     def __init__(self):
         import rclpy
-        from irb_control.node_util import state_qos
+        from irb_description.node_main import state_qos
         from irb_interfaces.msg import ControllerState
         from irb_interfaces.srv import PlanPath
         from rclpy.executors import SingleThreadedExecutor
@@ -147,7 +147,7 @@ class Link:
 def main(args=None) -> int:
     from ament_index_python.packages import get_package_share_directory
     from irb_control.process_group import ProcessGroup, ProcessSpec, ros2_run_cmd
-    share = Path(get_package_share_directory('irb_identification'))
+    share = Path(get_package_share_directory('irb_bringup'))
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='short version (CI end-to-end test)')
     ap.add_argument('--config', default=str(share / 'config' / 'thesis_run.yaml'))

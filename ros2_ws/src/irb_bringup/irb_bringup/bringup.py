@@ -1,10 +1,10 @@
-"""`ros2 run irb_identification bringup [--config YAML]`: the node graph as processes.
+"""`ros2 run irb_bringup bringup [--config YAML]`: the node graph as processes.
 
 PyPI has no launch_ros, so this starts each node of config/bringup.yaml with `ros2 run`,
 prefixes their output, and runs until Ctrl-C / SIGTERM or until a required node fails; then
 it stops every node (SIGINT, SIGTERM, SIGKILL after bounded waits). Exit code 0 after a
 requested stop, 1 when a node failed. On a full ROS 2 install the same graph is
-`ros2 launch irb_identification irb_graph.launch.py`.
+`ros2 launch irb_bringup irb_graph.launch.py`.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from .graph_spec import load_graph
 
 def main(args=None) -> int:
     from ament_index_python.packages import get_package_share_directory
-    default = Path(get_package_share_directory('irb_identification')) / 'config' / 'bringup.yaml'
+    default = Path(get_package_share_directory('irb_bringup')) / 'config' / 'bringup.yaml'
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--config', default=str(default), help='graph YAML')
     a = ap.parse_args(args)

@@ -1,8 +1,8 @@
-"""Launch file for full ROS 2 installs: the same graph as `ros2 run irb_identification bringup`.
+"""Launch file for full ROS 2 installs: the same graph as `ros2 run irb_bringup bringup`.
 
-    ros2 launch irb_identification irb_graph.launch.py [config:=/path/to/bringup.yaml]
+    ros2 launch irb_bringup irb_graph.launch.py [config:=/path/to/bringup.yaml]
 
-Both read config/bringup.yaml through irb_identification.graph_spec.
+Both read config/bringup.yaml through irb_bringup.graph_spec.
 """
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from irb_identification.graph_spec import load_graph
+from irb_bringup.graph_spec import load_graph
 
 
 def _nodes(context):
@@ -22,7 +22,7 @@ def _nodes(context):
 
 
 def generate_launch_description():
-    default = str(Path(get_package_share_directory('irb_identification')) / 'config'
+    default = str(Path(get_package_share_directory('irb_bringup')) / 'config'
                   / 'bringup.yaml')
     return LaunchDescription([
         DeclareLaunchArgument('config', default_value=default,

@@ -5,8 +5,8 @@ import subprocess
 
 import pytest
 
-from irb_identification.run_report import circle_error, saving_percent
-from irb_identification.thesis_run import new_run_id
+from irb_bringup.run_report import circle_error, saving_percent
+from irb_bringup.thesis_run import new_run_id
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -28,7 +28,7 @@ def test_circle_error_and_saving():
 
 def test_quick_pipeline_end_to_end(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    res = subprocess.run(['ros2', 'run', 'irb_identification', 'thesis_run', '--quick',
+    res = subprocess.run(['ros2', 'run', 'irb_bringup', 'thesis_run', '--quick',
                           '--root', str(tmp_path)], capture_output=True, text=True,
                          timeout=900, env=env)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
