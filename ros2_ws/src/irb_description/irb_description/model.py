@@ -109,15 +109,24 @@ class RobotModel:
         p = np.asarray(p, float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise UnreachableError(f'point must be 3 finite numbers, got {p!r}')
-        x, y, z = p
+        return self.ik_many(p[None, :], branch, check_limits)[0]
+
+    def ik_many(self, p: np.ndarray, branch: str = 'elbow_up', check_limits: bool = True
+                ) -> np.ndarray:
+        """``ik`` for points p (M, 3) [m] at once -> q (M, 3) [rad]; UnreachableError naming
+        the first point that has no solution (or needs a joint outside its limits)."""
+        p = np.atleast_2d(np.asarray(p, float))
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
         q1 = np.arctan2(y, x)
         r = np.hypot(x, y) - self._shoulder[0]
         s = z - self._shoulder[1]
         a2, l3 = self._a2, self._l3
         k = (a2**2 + l3**2 - r**2 - s**2) / (2.0 * a2 * l3)   # = sin(q3)
-        if abs(k) > 1.0:
+        out = ~(np.abs(k) <= 1.0)
+        if np.any(out):
+            j = int(np.argmax(out))
             raise UnreachableError(
-                f'point {p.tolist()} is {np.hypot(r, s):.4f} m from joint 2, outside '
+                f'point {p[j].tolist()} is {np.hypot(r[j], s[j]):.4f} m from joint 2, outside '
                 f'[{abs(a2 - l3):.4f}, {a2 + l3:.4f}] m')
         if branch == 'elbow_up':
             q3 = np.arcsin(k)
@@ -128,15 +137,56 @@ class RobotModel:
         A = a2 - l3 * np.sin(q3)
         B = l3 * np.cos(q3)
         q2 = np.arctan2(A * r - B * s, B * r + A * s)
-        q = np.array([q1, q2, q3])
+        q = np.stack([q1, q2, q3], axis=1)
         if check_limits:
             bad = (q < self.limits.lower - 1e-12) | (q > self.limits.upper + 1e-12)
             if np.any(bad):
-                names = [n for n, b in zip(self.joint_names, bad) if b]
+                j = int(np.argmax(bad.any(axis=1)))
+                names = [n for n, b in zip(self.joint_names, bad[j]) if b]
                 raise UnreachableError(
-                    f'point {p.tolist()} needs {names} outside their limits '
-                    f'(q = {np.degrees(q).round(2).tolist()} deg)')
+                    f'point {p[j].tolist()} needs {names} outside their limits '
+                    f'(q = {np.degrees(q[j]).round(2).tolist()} deg)')
         return q
+
+    def arm_derivatives(self, q: np.ndarray, p1: np.ndarray, p2: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint derivatives along a TCP curve, closed form (vectorised, no pinocchio).
+
+        q (M, 3) [rad] on the curve, p1 = dp/ds, p2 = d2p/ds2 (M, 3) of the TCP; returns
+        dq/ds, d2q/ds2 (M, 3): q1 from the cylindrical coordinates of p (q1 = atan2(y, x)),
+        q2, q3 from the arm plane, where (rho - shoulder_r, z - shoulder_z) =
+        (a2 sin q2 + l3 cos(q2 + q3), a2 cos q2 - l3 sin(q2 + q3)) (the closed-form IK
+        inverted; equal to J^-1 p' and J^-1 (p'' - J' q') of pinocchio's Jacobian, tested).
+        Singular where rho = 0 (on the base axis) or cos q3 = 0 (arm stretched or folded).
+        """
+        q, p1, p2 = (np.atleast_2d(np.asarray(v, float)) for v in (q, p1, p2))
+        q1, q2, q3 = q[:, 0], q[:, 1], q[:, 2]
+        a2, l3 = self._a2, self._l3
+        rho = a2 * np.sin(q2) + l3 * np.cos(q2 + q3) + self._shoulder[0]
+        x, y = rho * np.cos(q1), rho * np.sin(q1)
+        xd, yd, zd = p1[:, 0], p1[:, 1], p1[:, 2]
+        xdd, ydd, zdd = p2[:, 0], p2[:, 1], p2[:, 2]
+        u = x * xd + y * yd
+        rho_d = u / rho
+        rho_dd = (xd**2 + yd**2 + x * xdd + y * ydd - rho_d**2) / rho
+        w = x * yd - y * xd
+        q1_d = w / rho**2
+        q1_dd = (x * ydd - y * xdd) / rho**2 - 2.0 * q1_d * rho_d / rho
+        S, C = np.sin(q2 + q3), np.cos(q2 + q3)
+        # planar Jacobian d(r, s)/d(q2, q3) and its inverse (det = -a2 l3 cos q3)
+        j11, j12 = a2 * np.cos(q2) - l3 * S, -l3 * S
+        j21, j22 = -a2 * np.sin(q2) - l3 * C, -l3 * C
+        det = j11 * j22 - j12 * j21
+
+        def solve(br, bs):
+            return (j22 * br - j12 * bs) / det, (-j21 * br + j11 * bs) / det
+        q2_d, q3_d = solve(rho_d, zd)
+        q23_d = q2_d + q3_d
+        dr = -a2 * np.sin(q2) * q2_d**2 - l3 * C * q23_d**2
+        ds = -a2 * np.cos(q2) * q2_d**2 + l3 * S * q23_d**2
+        q2_dd, q3_dd = solve(rho_dd - dr, zdd - ds)
+        return (np.stack([q1_d, q2_d, q3_d], axis=1),
+                np.stack([q1_dd, q2_dd, q3_dd], axis=1))
 
     # --- dynamics (no friction; see .friction) ------------------------------------------
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:

@@ -2,7 +2,8 @@
 
 Thesis eq. 5.1-5.5 and 6.1-6.3: q = Phi(theta), qd = Phi'(theta) thetad,
 qdd = Phi''(theta) thetad^2 + Phi'(theta) thetadd. Phi comes from the closed-form IK;
-Phi' = J^-1 p'(theta) and Phi'' = J^-1 (p''(theta) - dJ/dt Phi') with the model's Jacobian.
+Phi' = J^-1 p'(theta) and Phi'' = J^-1 (p''(theta) - dJ/dt Phi'), in closed form
+(``RobotModel.arm_derivatives``, checked against pinocchio's Jacobian in the tests).
 No ROS imports.
 """
 from __future__ import annotations
@@ -11,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import RobotModel
+from .model import RobotModel, UnreachableError
 
 
 @dataclass(frozen=True)
@@ -90,18 +91,50 @@ def joint_path(model: RobotModel, path: CirclePath, theta: np.ndarray,
     Raises model.UnreachableError when any point is outside the workspace or joint limits.
     """
     theta = np.atleast_1d(np.asarray(theta, float))
-    q = np.empty((theta.size, model.nq))
-    dq = np.empty_like(q)
-    ddq = np.empty_like(q)
-    pts, dpts, ddpts = path.point(theta), path.d_point(theta), path.dd_point(theta)
-    for k in range(theta.size):
-        q[k] = model.ik(pts[k], branch)
-        J = model.jacobian(q[k])
-        dq[k] = np.linalg.solve(J, dpts[k])
-        ddq[k] = np.linalg.solve(J, ddpts[k] - model.tcp_drift(q[k], dq[k]))
+    q = model.ik_many(path.point(theta), branch)
+    dq, ddq = model.arm_derivatives(q, path.d_point(theta), path.dd_point(theta))
     return JointPath(theta, q, dq, ddq)
 
 
 def thesis_circle() -> CirclePath:
     """The thesis's circle: centre (0.6, 0, 0.13) m, r = 0.15 m, start at (0.75, 0, 0.13)."""
     return CirclePath(np.array([0.6, 0.0, 0.13]), 0.15, 0.0, 1)
+
+
+def check_joint_path(model: RobotModel, path: CirclePath, samples: int = 4096,
+                     branch: str = 'elbow_up') -> None:
+    """Check the whole joint motion along ``path``, not only points: reachable everywhere,
+    continuous (joint 1 unwrapped across +-180 deg) and inside the position limits between the
+    samples too. Raises UnreachableError naming the joint, theta [rad] and the TCP point.
+
+    ``samples`` theta values over [0, 2 pi]; between two samples a joint cannot pass a limit
+    unseen: the check uses max(q_k, q_k+1) + |q''| dtheta^2 / 8 (the largest excursion of a
+    function with that curvature above its chord), q'' by finite differences.
+    """
+    theta = np.linspace(0.0, 2.0 * np.pi, samples)
+    pts = path.point(theta)
+    try:
+        q = model.ik_many(pts, branch, check_limits=False)
+    except UnreachableError as exc:
+        raise UnreachableError(f'the path leaves the workspace: {exc}') from None
+    q[:, 0] = np.unwrap(q[:, 0])
+    q[:, 0] -= 2 * np.pi * np.round(q[0, 0] / (2 * np.pi))    # start inside (-pi, pi]
+    h = theta[1] - theta[0]
+    ddq = np.zeros_like(q)
+    ddq[1:-1] = (q[2:] - 2 * q[1:-1] + q[:-2]) / h ** 2
+    curv = np.maximum(np.abs(ddq[:-1]), np.abs(ddq[1:])) * h ** 2 / 8
+    hi_seg = np.maximum(q[:-1], q[1:]) + curv
+    lo_seg = np.minimum(q[:-1], q[1:]) - curv
+    lower, upper = model.limits.lower, model.limits.upper
+    for i, name in enumerate(model.joint_names):
+        out = (hi_seg[:, i] > upper[i]) | (lo_seg[:, i] < lower[i])
+        if np.any(out):
+            k = int(np.argmax(out))
+            side, lim = ((upper[i], 'upper') if hi_seg[k, i] > upper[i]
+                         else (lower[i], 'lower'))
+            raise UnreachableError(
+                f'{name} crosses its {lim} limit ({np.degrees(side):.0f} deg) along the path '
+                f'near theta = {theta[k]:.4f} rad, point {np.round(pts[k], 4).tolist()} m '
+                f'({name} = {np.degrees(q[k, i]):.1f} deg there'
+                + (', continuing across +-180 deg' if i == 0 and abs(q[k, i]) > np.pi - 0.2
+                   else '') + ')')

@@ -60,7 +60,7 @@ def evaluate(profile: ThetaProfile, sample_path: Callable, torque: Callable,
     """Resample ``profile`` at ``rate`` [Hz] (plus the end point) and check it.
 
     sample_path(theta (M,)) -> object with q, dq, ddq (M, n) (irb_description JointPath);
-    torque(q, qd, qdd) -> tau (n,) [N m] for one sample (rigid body + friction).
+    torque(q, qd, qdd) with (M, n) arrays -> tau (M, n) [N m] (rigid body + friction).
     """
     T = profile.duration
     t = np.arange(0.0, T, 1.0 / rate)
@@ -70,7 +70,7 @@ def evaluate(profile: ThetaProfile, sample_path: Callable, torque: Callable,
     jp = sample_path(theta)
     qd = jp.dq * theta_dot[:, None]
     qdd = jp.ddq * theta_dot[:, None] ** 2 + jp.dq * theta_ddot[:, None]
-    tau = np.array([torque(jp.q[k], qd[k], qdd[k]) for k in range(t.size)])
+    tau = np.asarray(torque(jp.q, qd, qdd), float)
     power = np.abs(tau * qd)
     energy = float(np.trapezoid(power.sum(axis=1), t))
     peak_torque = np.abs(tau).max(axis=0)

@@ -48,7 +48,9 @@ def _duration(t: float) -> Duration:
 
 
 def trajectory_msg(result: PlanResult, nodes: dict) -> JointTrajectory:
-    """JointTrajectory at the profile's nodes: positions, velocities, accelerations, effort."""
+    """JointTrajectory at the checked points (the profile's nodes and, where needed for a
+    quintic interpolation to stay on the path, points between them): positions, velocities,
+    accelerations, effort."""
     traj = JointTrajectory(joint_names=list(result.joint_names))
     for k, t in enumerate(nodes['t']):
         traj.points.append(JointTrajectoryPoint(
@@ -72,20 +74,24 @@ def theta_profile_msg(result: PlanResult) -> Float64MultiArray:
 def fill_response(resp: PlanPath.Response, result: PlanResult, nodes: dict
                   ) -> PlanPath.Response:
     """Copy a successful plan into the service response."""
-    ev, base = result.evaluation, result.baseline
+    ev, base, ver = result.evaluation, result.baseline, result.verification
     resp.success = True
     resp.error_code = PlanPath.Response.ERROR_NONE
-    resp.message = '; '.join([f'{result.objective} plan, {ev.duration:.3f} s, '
-                              f'{ev.energy:.2f} J'] + result.notes)
+    resp.message = '; '.join([f'{result.objective} plan, {ver.duration:.3f} s, '
+                              f'{ver.energy:.2f} J as played, {len(nodes["t"])} points, '
+                              f'path error <= {ver.max_path_deviation * 1e6:.1f} um'] + result.notes)
     resp.trajectory = trajectory_msg(result, nodes)
     resp.theta = result.profile.theta.tolist()
     resp.theta_dot = result.profile.theta_dot.tolist()
     resp.theta_ddot = result.profile.theta_ddot_nodes.tolist()
-    resp.energy = ev.energy
+    resp.theta_interpolation = (PlanPath.Response.INTERPOLATION_QUADRATIC
+                                if result.profile.quadratic
+                                else PlanPath.Response.INTERPOLATION_LINEAR)
+    resp.energy = ver.energy
     resp.optimizer_energy = float(result.optimizer_energy)
     resp.min_duration = float(result.min_duration)
     resp.duration = ev.duration
-    resp.peak_torque = ev.peak_torque.tolist()
+    resp.peak_torque = ver.peak_torque.tolist()
     resp.solve_time = float(result.solve_time)
     resp.iterations = int(result.iterations)
     resp.solver_status = result.status

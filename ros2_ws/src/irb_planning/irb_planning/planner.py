@@ -2,35 +2,48 @@
 
 ``Planner.plan(PlanRequest) -> PlanResult`` or raises ``PlanError`` with an ERROR_* code.
 Problems are built once per (path, grid, boundary, friction map) and cached; every request
-re-solves them with new bounds/parameters. Every returned plan has been resampled at
-``evaluation_rate_hz`` by the independent evaluator; its energy is the one reported.
+re-solves them with new bounds/parameters. What a request gets back has passed, in order:
+
+1. the path check along the whole path (``irb_description.path.check_joint_path``: reachable,
+   continuous, inside the position limits between samples too; else ERROR_UNREACHABLE);
+2. the solve, the profile rescaled so that its exact time law gives the requested duration,
+   and the 1 kHz evaluator (``evaluator.evaluate``); where the exact friction map or the
+   torque between grid points breaks a limit the NLP kept with its margin, that limit is
+   tightened by the measured excess and the problem re-solved (``adapt_rounds`` times);
+3. the trajectory message, dense enough that its quintic interpolation stays on the path,
+   and the independent check of that message as a controller plays it (``verify.py``: own
+   time integration, own DH kinematics, own reading of the friction map). A plan that fails
+   it is refused, never returned.
 Thread safety: ``plan`` may be called from several threads; each cached problem serialises
 its own solves, and the model's pinocchio workspace is guarded by a lock.
 """
 from __future__ import annotations
 
+import ctypes
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from irb_description.friction import FrictionMap, FrictionMapError, load_friction_map
+from irb_description.friction import FrictionMap, FrictionMapError
 from irb_description.model import RobotModel, UnreachableError
-from irb_description.path import CirclePath, joint_path
+from irb_description.path import CirclePath, check_joint_path, joint_path
 
 from .baselines import EnergyBound, trapezoid_profile
 from .evaluator import Evaluation, LimitSet, evaluate
 from .fourier import FourierProblem
+from .map_files import default_map_dirs, read_map, resolve_map_path
 from .problem import (casadi_friction, casadi_inverse_dynamics, effective_speed_limit,
                       path_dynamics)
 from .profile import ThetaProfile
 from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVALID_REQUEST,
                       ERROR_SOLVER, ERROR_UNREACHABLE, OBJECTIVE_ENERGY, OBJECTIVE_TIME,
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
-from .transcription import (BOUNDARY_PERIODIC, TIME_OBJECTIVE_ENERGY_WEIGHT, SolveRequest,
-                            Transcription)
+from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
+                            SolveRequest, Transcription)
+from .verify import ArmKinematics, Circle, MapFriction, Verification, verify_plan
 
 
 @dataclass(frozen=True)
@@ -38,6 +51,7 @@ class PlannerSettings:
     """Planner settings (the node's parameters; units in the names)."""
 
     grid_size: int = 200                 # theta nodes
+    max_grid_size: int = 1000            # largest grid a request may ask for
     min_theta_dot_rad_s: float = 0.05    # delta: theta_dot >= delta inside the path
     friction_smoothing_rad_s: float = 1e-3   # tanh(v / eps) for sign(v) in the NLP
     abs_smoothing_j_rad: float = 0.0     # 0: exact |.| (split); > 0: sqrt(y^2 + eps^2)
@@ -48,6 +62,11 @@ class PlannerSettings:
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
     cache_size: int = 8                  # built problems kept (LRU)
+    friction_map_dirs: tuple = ()        # where maps may be read from; () = default_map_dirs()
+    path_tolerance_m: float = 1e-4       # TCP deviation of the message played quintically
+    max_trajectory_points: int = 20000   # message points at most
+    adapt_rounds: int = 3                # re-solves with limits tightened by measured excess
+    path_check_samples: int = 4096       # theta samples of the along-path check
 
 
 @dataclass
@@ -70,6 +89,8 @@ class PlanResult:
     request: PlanRequest
     fourier_coeffs: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    trajectory: dict | None = None       # the message's points: t, theta, q, qd, qdd, tau
+    verification: Verification | None = None   # the independent check of that message
 
 
 class _Entry:
@@ -91,20 +112,29 @@ class Planner:
                  settings: PlannerSettings | None = None):
         self.model = model or RobotModel.load()
         self.settings = settings or PlannerSettings()
+        if not self.settings.min_theta_dot_rad_s > 0:
+            raise ValueError('min_theta_dot_rad_s must be > 0 (the controller must not stall)')
         self._model_lock = threading.Lock()
         self._cache: OrderedDict = OrderedDict()
         self._cache_lock = threading.Lock()
+        self._checked_paths: OrderedDict = OrderedDict()
         self._inverse_dynamics = casadi_inverse_dynamics(self.model)
+        self.map_dirs = [Path(d) for d in self.settings.friction_map_dirs] or default_map_dirs()
+        k = self.model.kinematics
+        lim = self.model.limits
+        self._kin = dict(a=k.dh_a, alpha=k.dh_alpha, d=k.dh_d, offset=k.dh_offset,
+                         lower=lim.lower, upper=lim.upper)
 
     # --- the pieces ---------------------------------------------------------------------
-    def friction_map(self, path: str) -> FrictionMap:
-        """The nominal map ('') or the file; PlanError(FRICTION_MAP) if it is unusable."""
-        if not path:
-            return self.model.friction
-        try:
-            return load_friction_map(Path(path), self.model.joint_names)
-        except FrictionMapError as exc:
-            raise PlanError(ERROR_FRICTION_MAP, str(exc)) from exc
+    def friction_map(self, name: str) -> tuple[FrictionMap, dict]:
+        """(map, its joints mapping) of the nominal map ('') or of a file in the allowed
+        directories; PlanError(FRICTION_MAP) if it is not allowed or not usable."""
+        if not name:
+            fm = self.model.friction
+            return fm, fm.to_dict()['friction_map']['joints']
+        path = resolve_map_path(name, self.map_dirs)
+        fm, block = read_map(path, self.model.joint_names)
+        return fm, block['joints']
 
     def sample_path(self, path: CirclePath):
         """theta (K,) -> JointPath of ``path`` (thread safe)."""
@@ -114,16 +144,39 @@ class Planner:
         return sample
 
     def torque(self, friction: FrictionMap):
-        """(q, qd, qdd) -> tau (n,) [N m]: pinocchio RNEA + numpy friction (the evaluator's)."""
+        """(q, qd, qdd) (M, n) -> tau (M, n) [N m]: pinocchio RNEA + numpy friction map (the
+        evaluator's dynamics)."""
         def tau(q, qd, qdd):
-            with self._model_lock:
-                return self.model.inverse_dynamics_with_friction(q, qd, qdd, friction)
+            q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
+            return self.rigid_torque(q, qd, qdd) + friction.torque(qd)
         return tau
 
+    def rigid_torque(self, q, qd, qdd):
+        """pinocchio RNEA on the URDF, no friction, for (M, n) arrays -> (M, n) [N m]."""
+        q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
+        with self._model_lock:
+            return np.array([self.model.inverse_dynamics(q[k], qd[k], qdd[k])
+                             for k in range(q.shape[0])])
+
+    def check_path(self, req: PlanRequest, path: CirclePath) -> None:
+        """The whole joint motion along the path (cached per path); PlanError(UNREACHABLE)."""
+        key = req.path_key
+        with self._cache_lock:
+            if key in self._checked_paths:
+                self._checked_paths.move_to_end(key)
+                return
+        try:
+            with self._model_lock:
+                check_joint_path(self.model, path, self.settings.path_check_samples)
+        except UnreachableError as exc:
+            raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
+        with self._cache_lock:
+            self._checked_paths[key] = True
+            while len(self._checked_paths) > 256:
+                self._checked_paths.popitem(last=False)
+
     def _entry(self, req: PlanRequest, path: CirclePath, fm: FrictionMap) -> _Entry:
-        fkey = (req.friction_map, Path(req.friction_map).stat().st_mtime
-                if req.friction_map else 0.0)
-        key = (req.path_key, req.grid_size, req.boundary, fkey)
+        key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__())
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
@@ -136,17 +189,21 @@ class Planner:
             mids = path_dynamics(0.5 * (theta[1:] + theta[:-1]), sample,
                                  self._inverse_dynamics)
         except UnreachableError as exc:
-            raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from exc
+            raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
         friction = casadi_friction(fm, s.friction_smoothing_rad_s)
         tr = Transcription(nodes, mids, friction, req.boundary, s.abs_smoothing_j_rad,
                            s.max_iterations, s.tolerance, s.warm_start)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
+        evicted = False
         with self._cache_lock:
             self._cache[key] = entry
             while len(self._cache) > s.cache_size:
                 self._cache.popitem(last=False)
+                evicted = True
+        if evicted:
+            release_memory()
         return entry
 
     def _limits(self, req: PlanRequest, fm: FrictionMap) -> tuple[SolveRequest, LimitSet]:
@@ -159,20 +216,75 @@ class Planner:
                            tau * keep)
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
-    def min_duration(self, entry: _Entry, base: SolveRequest) -> tuple[float, object]:
-        """Time-optimal duration [s] and its result (cached per limits)."""
+    def _solve_checked(self, entry: _Entry, sreq: SolveRequest, checked: LimitSet, sample,
+                       torque, fixed_duration: float, solve=None):
+        """Solve, rescale the profile to the exact ``fixed_duration`` (0 = keep its own),
+        evaluate; where a limit is broken (exact map vs the NLP's smooth one, torque between
+        grid points), tighten that limit by the measured excess and solve again.
+        Returns (result, profile, evaluation, notes); raises PlanError if the solver fails."""
+        solve = solve or entry.transcription.solve
+        notes = []
+        for attempt in range(self.settings.adapt_rounds + 1):
+            res = solve(sreq)
+            if not res.stats.success or res.profile is None:
+                raise PlanError(ERROR_SOLVER, 'the optimiser found no solution '
+                                f'({_status_text(res.stats.status)}, '
+                                f'{res.stats.iterations} iterations)')
+            profile = res.profile
+            for _ in range(2 if fixed_duration > 0 else 0):     # 2nd pass: round-off
+                profile = profile.scaled_in_time(fixed_duration / profile.duration)
+            ev = evaluate(profile, sample, torque, checked, self.settings.evaluation_rate_hz)
+            over_tau = ev.peak_torque - checked.torque
+            over_v = ev.peak_speed - checked.velocity
+            if ev.ok or attempt == self.settings.adapt_rounds:
+                return res, profile, ev, notes
+            tau = np.where(over_tau > 0, sreq.torque_limit - over_tau - 1e-3 * checked.torque,
+                           sreq.torque_limit)
+            vel = np.where(over_v > 0, sreq.velocity_limit - over_v - 1e-3 * checked.velocity,
+                           sreq.velocity_limit)
+            notes.append('limits tightened after the exact check: ' + '; '.join(ev.violations))
+            sreq = replace(sreq, torque_limit=tau, velocity_limit=vel)
+        raise AssertionError('unreachable')
+
+    def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, sample,
+                     torque) -> tuple[float, tuple]:
+        """Time-optimal duration [s] (exact time law of a profile that passes the 1 kHz
+        check) and (result, profile, evaluation, notes); cached per limits."""
         key = (base.min_theta_dot, tuple(base.velocity_limit), tuple(base.torque_limit))
         with entry.lock:
             if key in entry.min_duration:
                 return entry.min_duration[key]
         req = SolveRequest(0.0, 1.0, TIME_OBJECTIVE_ENERGY_WEIGHT, base.min_theta_dot,
                            base.velocity_limit, base.torque_limit)
-        res = entry.transcription.solve(req, warm=False)
-        if not res.stats.success:
-            raise PlanError(ERROR_SOLVER, f'time-optimal problem failed: {res.stats.status}')
+        try:
+            out = self._solve_checked(entry, req, checked, sample, torque, 0.0,
+                                      lambda r: entry.transcription.solve(r, warm=False))
+        except PlanError as exc:
+            infeasible = 'cannot all be met' in exc.message
+            raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
+                            f'time-optimal problem: {exc.message}') from None
+        if out[2].violations:
+            raise PlanError(ERROR_SOLVER, 'the time-optimal profile breaks a limit after '
+                            f'{self.settings.adapt_rounds} tightened re-solves: '
+                            + '; '.join(out[2].violations))
+        value = (out[1].duration, out)
         with entry.lock:
-            entry.min_duration[key] = (res.duration, res)
-        return res.duration, res
+            entry.min_duration[key] = value
+        return value
+
+    def max_duration(self, entry: _Entry, delta: float) -> float:
+        """The longest duration [s] the planner accepts: theta_dot = delta along the path,
+        leaving and reaching rest as fast as the transcription's rest rows allow (a valid
+        profile of the transcription; slower would mean standing still on the path)."""
+        theta = entry.nodes.theta
+        if entry.transcription.boundary == BOUNDARY_PERIODIC:
+            return 2 * np.pi / delta
+        h = np.diff(theta)
+        td = np.full(theta.size, delta)
+        td[0] = td[-1] = 0.0
+        a = np.zeros(theta.size)
+        a[0], a[-1] = delta ** 2 / h[0], -delta ** 2 / h[-1]
+        return ThetaProfile(theta, td, a).duration
 
     def fourier_problem(self, entry: _Entry, order: int, sample) -> FourierProblem:
         with entry.lock:
@@ -189,8 +301,8 @@ class Planner:
 
     def bound(self, req: PlanRequest, duration: float) -> float:
         """Convex lower bound [J] at ``duration`` for the request's path/grid/limits."""
-        req = validate(req, self.settings.grid_size)
-        fm = self.friction_map(req.friction_map)
+        req = validate(req, self.settings.grid_size, self.settings.max_grid_size)
+        fm, _ = self.friction_map(req.friction_map)
         path = request_path(req)
         entry = self._entry(req, path, fm)
         base, _ = self._limits(req, fm)
@@ -201,54 +313,70 @@ class Planner:
         res = entry.bound.solve(SolveRequest(duration, 0.0, 1.0, base.min_theta_dot,
                                              base.velocity_limit, base.torque_limit))
         if not res.stats.success:
-            raise PlanError(ERROR_SOLVER, f'bound problem failed: {res.stats.status}')
+            raise PlanError(ERROR_SOLVER, 'bound problem failed: '
+                            f'{_status_text(res.stats.status)}')
         return res.energy
 
     # --- the request --------------------------------------------------------------------
     def plan(self, request: PlanRequest) -> PlanResult:
         """Plan ``request`` (see module docstring); raises PlanError."""
         s = self.settings
-        req = validate(request, s.grid_size)
-        fm = self.friction_map(req.friction_map)
+        req = validate(request, s.grid_size, s.max_grid_size)
+        fm, raw_map = self.friction_map(req.friction_map)
         path = request_path(req)
+        self.check_path(req, path)
         entry = self._entry(req, path, fm)
         base, checked = self._limits(req, fm)
         sample = self.sample_path(path)
-        t_min, t_res = self.min_duration(entry, base)
+        torque = self.torque(fm)
+        t_min, t_out = self.min_duration(entry, base, checked, sample, torque)
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
             raise PlanError(ERROR_INFEASIBLE_DURATION,
                             f'duration {req.duration:.4f} s is shorter than the time-optimal '
                             f'{t_min:.4f} s for this path and limits')
+        t_max = self.max_duration(entry, base.min_theta_dot)
+        if req.duration > t_max:
+            raise PlanError(ERROR_INFEASIBLE_DURATION,
+                            f'duration {req.duration:.6g} s is longer than the slowest motion '
+                            f'along the path, {t_max:.2f} s: the path speed stays >= '
+                            f'min_theta_dot = {base.min_theta_dot:g} rad/s inside the path '
+                            '(a controller must not creep or stall on the path); plan a '
+                            'shorter motion and wait at rest before or after it')
         coeffs = None
-        notes = []
         t0 = time.perf_counter()
         if req.objective == OBJECTIVE_TIME:
-            profile, e_opt, stats = t_res.profile, t_res.energy, t_res.stats
+            res, profile, evaluation, notes = t_out
+            e_opt, stats = res.energy, res.stats
         elif req.objective == OBJECTIVE_TRAPEZOID:
             profile = trapezoid_profile(req.duration, s.trapezoid_ramp_fraction)
-            e_opt, stats = float('nan'), None
+            e_opt, stats, notes = float('nan'), None, []
+            evaluation = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz)
+            if evaluation.violations:
+                raise PlanError(ERROR_INFEASIBLE_DURATION, 'the trapezoid at this duration '
+                                'breaks a limit: ' + '; '.join(evaluation.violations))
         else:
             sreq = SolveRequest(req.duration, req.time_weight, 1.0, base.min_theta_dot,
                                 base.velocity_limit, base.torque_limit)
-            if req.objective == OBJECTIVE_ENERGY:
-                res = entry.transcription.solve(sreq)
-            else:
-                res = self.fourier_problem(entry, req.fourier_order, sample).solve(sreq)
-                coeffs = res.coeffs
-            if not res.stats.success or res.profile is None:
-                raise PlanError(ERROR_SOLVER, f'{req.objective} problem failed: '
-                                f'{res.stats.status} after {res.stats.iterations} iterations')
-            profile, e_opt, stats = res.profile, res.energy, res.stats
+            solve = None
+            if req.objective != OBJECTIVE_ENERGY:
+                problem = self.fourier_problem(entry, req.fourier_order, sample)
+                solve = problem.solve
+            res, profile, evaluation, notes = self._solve_checked(
+                entry, sreq, checked, sample, torque, req.duration, solve)
+            coeffs = getattr(res, 'coeffs', None)
+            e_opt, stats = res.energy, res.stats
+            if evaluation.violations:
+                raise PlanError(ERROR_SOLVER, f'{req.objective} plan breaks a limit at '
+                                f'{s.evaluation_rate_hz:g} Hz after {s.adapt_rounds} '
+                                'tightened re-solves: ' + '; '.join(evaluation.violations))
         elapsed = time.perf_counter() - t0
-        evaluation = evaluate(profile, sample, self.torque(fm), checked, s.evaluation_rate_hz)
-        if evaluation.violations:
-            code = (ERROR_INFEASIBLE_DURATION if req.objective == OBJECTIVE_TRAPEZOID
-                    else ERROR_SOLVER)
-            raise PlanError(code, f'{req.objective} plan violates limits at '
-                            f'{s.evaluation_rate_hz:g} Hz: ' + '; '.join(evaluation.violations))
+        trajectory, verification = self.trajectory(profile, req, path, fm, raw_map, checked)
+        if not verification.ok:
+            raise PlanError(ERROR_SOLVER, 'the plan failed the independent check and is not '
+                            'returned: ' + '; '.join(verification.problems))
         baseline = evaluation if req.objective == OBJECTIVE_TRAPEZOID else evaluate(
             trapezoid_profile(evaluation.duration, s.trapezoid_ramp_fraction), sample,
-            self.torque(fm), checked, s.evaluation_rate_hz)
+            torque, checked, s.evaluation_rate_hz)
         if baseline.violations:
             notes.append('trapezoid baseline violates limits: ' + baseline.violations[0])
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
@@ -261,27 +389,76 @@ class Planner:
             iterations=stats.iterations if stats else 0,
             status=stats.status if stats else 'closed form', baseline=baseline,
             joint_names=list(self.model.joint_names), request=req, fourier_coeffs=coeffs,
-            notes=notes)
+            notes=notes, trajectory=trajectory, verification=verification)
+
+    def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: CirclePath,
+                   fm: FrictionMap, raw_map: dict, checked: LimitSet
+                   ) -> tuple[dict, Verification]:
+        """The message's points and their independent check: the profile's nodes, each
+        interval split into m equal theta pieces (m = 1, 2, 4, ...) until the trajectory
+        played by quintic interpolation stays within path_tolerance_m / 2 of the path (or
+        the point budget is used; the check then says whether it is still within
+        path_tolerance_m)."""
+        s = self.settings
+        sample, torque = self.sample_path(path), self.torque(fm)
+        kin = ArmKinematics(velocity=checked.velocity, torque=checked.torque, **self._kin)
+        circle = Circle(np.asarray(req.center, float), float(req.radius),
+                        float(req.start_angle), int(req.direction))
+        friction = MapFriction(raw_map, self.model.joint_names)
+        nodes = profile.theta
+        prof = (nodes, profile.theta_dot, profile.theta_ddot_nodes, profile.quadratic)
+        m = 1
+        while True:
+            frac = np.arange(m) / m
+            theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
+                              nodes[-1])
+            t, td, tdd = profile.theta_at(theta)
+            jp = sample(theta)
+            qd = jp.dq * td[:, None]
+            qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
+            ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
+                              req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
+                              path_tolerance_m=s.path_tolerance_m)
+            if (ver.max_path_deviation <= 0.5 * s.path_tolerance_m
+                    or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points):
+                break
+            m *= 2
+        tau = torque(jp.q, qd, qdd)
+        return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}, ver
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the
         dynamics and limits ``plan`` checked it with (e.g. its energy at a finer rate)."""
         req = result.request
-        fm = self.friction_map(req.friction_map)
+        fm, _ = self.friction_map(req.friction_map)
         return evaluate(result.profile, self.sample_path(request_path(req)), self.torque(fm),
                         self._limits(req, fm)[1], rate_hz)
 
     def node_samples(self, result: PlanResult) -> dict:
-        """The plan at its theta nodes for the controller: t (N,) [s]; q, qd, qdd, tau (N, n)
-        (tau by the evaluator's dynamics, theta_ddot at a node = mean of its intervals)."""
-        req, pr = result.request, result.profile
-        jp = self.sample_path(request_path(req))(pr.theta)
-        td, tdd = pr.theta_dot[:, None], pr.theta_ddot_nodes[:, None]
-        qd = jp.dq * td
-        qdd = jp.ddq * td ** 2 + jp.dq * tdd
-        torque = self.torque(self.friction_map(req.friction_map))
-        tau = np.array([torque(jp.q[k], qd[k], qdd[k]) for k in range(pr.theta.size)])
-        return {'t': pr.times, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}
+        """The plan's trajectory message points (checked): t (K,) [s]; q, qd, qdd, tau (K, n)."""
+        return result.trajectory
+
+
+def release_memory() -> None:
+    """Give freed heap back to the OS after dropping built problems (glibc keeps CasADi's
+    freed blocks in its arenas otherwise; measured in benchmarks/bench_memory.py)."""
+    try:
+        ctypes.CDLL('libc.so.6').malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _status_text(status: str) -> str:
+    """IPOPT's return status in words."""
+    return {
+        'Maximum_Iterations_Exceeded': 'iteration limit reached',
+        'Infeasible_Problem_Detected': 'the limits cannot all be met',
+        'Restoration_Failed': 'no feasible point found',
+        'Solved_To_Acceptable_Level': 'solved to the acceptable level only',
+        'Error_In_Step_Computation': 'numerical trouble',
+        'Invalid_Number_Detected': 'a non-finite number in the problem',
+        'Maximum_CpuTime_Exceeded': 'time limit reached',
+    }.get(status, status.replace('_', ' ').lower())
 
 
 def request_path(req: PlanRequest) -> CirclePath:

@@ -17,6 +17,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
@@ -43,7 +44,18 @@ PARAMETERS = {
                                 'trapezoid baseline: each ramp as a fraction of T [-]'),
     'evaluation_rate_hz': ('evaluation_rate_hz', 'resampling rate of the check [Hz]'),
     'cache_size': ('cache_size', 'built problems kept (least recently used dropped) [-]'),
+    'max_grid_size': ('max_grid_size', 'largest grid_size a request may ask for [-]'),
+    'path_tolerance_m': ('path_tolerance_m', 'largest TCP deviation of the trajectory message '
+                         'played by quintic interpolation (else more points) [m]'),
+    'max_trajectory_points': ('max_trajectory_points', 'points of the trajectory message at '
+                              'most [-]'),
+    'adapt_rounds': ('adapt_rounds', 're-solves with a limit tightened by the excess the exact '
+                     'check measured [-]'),
+    'path_check_samples': ('path_check_samples', 'theta samples of the along-path joint check '
+                           '[-]'),
 }
+#: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
+MAP_DIRS = 'friction_map_dirs'
 
 
 class PlannerNode(Node):
@@ -56,8 +68,14 @@ class PlannerNode(Node):
         for name, (fieldname, text) in PARAMETERS.items():
             self.declare_parameter(name, getattr(defaults, fieldname),
                                    ParameterDescriptor(description=text, read_only=True))
+        dirs = self.declare_parameter(MAP_DIRS, Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description='directories friction-map files may be read from; empty = the share '
+                        'of irb_description and runs/, bags/ of $IRB_ROOT (or the working '
+                        'directory); relative names are looked up in them in order',
+            read_only=True)).value or []
         settings = PlannerSettings(**{f: self.get_parameter(n).value
-                                      for n, (f, _) in PARAMETERS.items()})
+                                      for n, (f, _) in PARAMETERS.items()},
+                                   friction_map_dirs=tuple(d for d in dirs if d))
         self.planner = Planner(settings=settings)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                              reliability=ReliabilityPolicy.RELIABLE)
@@ -68,7 +86,8 @@ class PlannerNode(Node):
         self.srv = self.create_service(PlanPath, 'plan_path', self.on_request,
                                        callback_group=MutuallyExclusiveCallbackGroup())
         self.get_logger().info(
-            f'serving plan_path ({dataclasses.asdict(settings)})')
+            f'serving plan_path ({dataclasses.asdict(settings)}); friction maps from '
+            f'{[str(d) for d in self.planner.map_dirs]}')
 
     def on_request(self, request, response):
         try:
@@ -79,7 +98,8 @@ class PlannerNode(Node):
         except Exception as exc:  # noqa: BLE001 - the node must keep serving
             self.get_logger().error(traceback.format_exc())
             return self._fail(response, request_error_code(exc),
-                              f'{type(exc).__name__}: {exc}')
+                              'internal error of the planner while planning this request '
+                              '(details in the planner log); please report it')
         messages.fill_response(response, result, nodes)
         self.pub_traj.publish(response.trajectory)
         self.pub_theta.publish(messages.theta_profile_msg(result))

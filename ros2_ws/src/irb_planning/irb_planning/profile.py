@@ -16,11 +16,16 @@ Between nodes, b = theta_dot^2 follows b' = 2 theta_ddot (Verscheure et al. 2009
   b(theta_k + s) = b_k + 2 a_k s + (a_{k+1} - a_k) s^2 / dtheta_k, which needs
   b_{k+1} - b_k = (a_k + a_{k+1}) dtheta_k (checked).
 
-Time law. A linear profile spends exactly dt_k = 2 dtheta_k / (theta_dot_k + theta_dot_{k+1})
-on interval k. A quadratic profile splits every interval into ``TIME_SUBSTEPS`` equal pieces
-and applies that rule on each piece (b from the quadratic at the piece ends); the relative error
-against the exact integral of dtheta / sqrt(b) is O((dtheta / TIME_SUBSTEPS)^2). The
-transcription's duration uses the same rule, so planned and sampled durations agree exactly.
+Time law (exact). On every interval the time is the exact integral of dtheta / theta_dot of
+the profile as interpolated: for a linear profile 2 dtheta_k / (theta_dot_k + theta_dot_{k+1})
+(constant theta_ddot); for a quadratic profile the closed form of the integral of
+1 / sqrt(b0 + 2 a0 s + kappa s^2) (log/atan forms written without cancellation, split at the
+vertex of b; ``interval_time``), which includes the rest ends b = 0 (finite when the profile
+leaves or reaches rest with theta_ddot != 0). ``sample`` inverts that law exactly (bisection on
+the closed form), so time stamps, samples and the duration are those of the profile itself,
+not of an approximation. The NLP (transcription.py) uses a piecewise approximation of this law
+(``TIME_SUBSTEPS`` pieces per interval) for its duration; the planner rescales the returned
+profile in time so that its exact duration is the requested one.
 """
 from __future__ import annotations
 
@@ -44,6 +49,68 @@ def linear_node_accelerations(theta: np.ndarray, b: np.ndarray) -> np.ndarray:
     theta (N,): the mean of the two neighbouring intervals' (b_{k+1} - b_k) / (2 dtheta_k)."""
     a = np.diff(b) / (2.0 * np.diff(theta))
     return np.concatenate([a[:1], 0.5 * (a[:-1] + a[1:]), a[-1:]])
+
+
+def interval_min_b(b0, a0, kappa, h):
+    """Minimum of b(s) = b0 + 2 a0 s + kappa s^2 over s in [0, h] (elementwise)."""
+    b1 = b0 + 2.0 * a0 * h + kappa * h ** 2
+    with np.errstate(divide='ignore', invalid='ignore'):
+        s_v = -a0 / kappa
+        inside = (kappa > 0) & (s_v > 0) & (s_v < h)
+        b_v = np.where(inside, b0 + a0 * s_v, np.inf)
+    return np.minimum(np.minimum(b0, b1), b_v)
+
+
+def _time_increasing(r, a0, sq0, a_s, sq_s, s):
+    """kappa = r^2 > 0, theta_ddot >= 0 on the piece: (1/r) ln(P_s / P_0), P = a + r sqrt(b)."""
+    S = (a0 + a_s) / (sq0 + sq_s)
+    return np.log1p(r * s * (r + S) / (a0 + r * sq0)) / r
+
+
+def _time_decreasing(r, a0, sq0, a_s, sq_s, s):
+    """kappa = r^2 > 0, theta_ddot <= 0 on the piece: (1/r) ln(Q_0 / Q_s), Q = r sqrt(b) - a
+    (the same antiderivative as ``_time_increasing`` without cancellation)."""
+    S = (a0 + a_s) / (sq0 + sq_s)
+    return np.log1p(r * s * (r - S) / (r * sq_s - a_s)) / r
+
+
+def time_to(b0, a0, kappa, s, b_s=None):
+    """Exact time [s] to go from s = 0 to ``s`` [rad] with theta_dot^2 = b0 + 2 a0 s + kappa s^2
+    (theta_ddot = a0 + kappa s), elementwise. inf where theta_dot reaches 0 on the way with
+    zero slope (no finite time); the caller guarantees b > 0 inside (0, s).
+
+    Antiderivatives of 1 / sqrt(b): kappa > 0: ln(a + sqrt(kappa b)) / sqrt(kappa);
+    kappa < 0: -asin(a / R) / sqrt(-kappa), R^2 = a^2 - kappa b; kappa = 0: 2 sqrt(b) / 2 a0.
+    Written as log1p / atan2 of differences that are formed without cancellation, so they stay
+    exact to round-off down to kappa -> 0 and at rest ends (b0 = 0 or b(s) = 0). ``b_s``, if
+    given, is b at s exactly (a node value: 0 at a rest end, where b computed from the
+    coefficients would carry round-off that the 1/sqrt singularity amplifies)."""
+    b0, a0, kappa, s = np.broadcast_arrays(*(np.asarray(x, float) for x in (b0, a0, kappa, s)))
+    a_s = a0 + kappa * s
+    if b_s is None:
+        b_s = b0 + s * (a0 + a_s)
+    b_s = np.maximum(np.broadcast_to(np.asarray(b_s, float), b0.shape), 0.0)
+    sq0, sq_s = np.sqrt(np.maximum(b0, 0.0)), np.sqrt(b_s)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        lin = 2.0 * s / (sq0 + sq_s)                        # kappa = 0 (b linear)
+        pos, neg = kappa > 0, kappa < 0
+        r = np.sqrt(np.abs(kappa))
+        # kappa < 0: (1/rho) atan2(rho (a0 sqrt(b_s) - a_s sqrt(b0)), rho^2 sqrt(b0 b_s) + a0 a_s)
+        S = (a0 + a_s) / (sq0 + sq_s)
+        num = s * (a0 * S + r ** 2 * sq0)
+        t_neg = np.arctan2(r * num, r ** 2 * sq0 * sq_s + a0 * a_s) / r
+        # kappa > 0: split at the vertex of b where theta_ddot changes sign
+        t_inc = _time_increasing(r, a0, sq0, a_s, sq_s, s)
+        t_dec = _time_decreasing(r, a0, sq0, a_s, sq_s, s)
+        s_v = -a0 / kappa
+        b_v = np.maximum(b0 + a0 * s_v, 0.0)
+        sq_v = np.sqrt(b_v)
+        t_split = (_time_decreasing(r, a0, sq0, 0.0, sq_v, s_v)
+                   + _time_increasing(r, 0.0, sq_v, a_s, sq_s, s - s_v))
+        t_pos = np.where(a0 >= 0, t_inc, np.where(a_s <= 0, t_dec, t_split))
+        out = np.where(pos, t_pos, np.where(neg, t_neg, lin))
+    out = np.where(s == 0, 0.0, out)
+    return np.where(np.isnan(out), np.inf, out)
 
 
 @dataclass(frozen=True)
@@ -78,10 +145,10 @@ class ThetaProfile:
             if np.any(gap > CONSISTENCY_RTOL * max(1.0, float(b.max()))):
                 raise ValueError('theta_ddot inconsistent with theta_dot: b_{k+1} - b_k != '
                                  f'(a_k + a_{{k+1}}) dtheta_k (worst {gap.max():.3g})')
-            b_pieces = self._pieces(th, b, a)[1]     # clamped at 0 (round-off)
-            if np.any(b_pieces[:-1] + b_pieces[1:] <= 0):
-                raise ValueError('theta_dot^2 of the quadratic profile goes negative or stops '
-                                 'inside an interval')
+            if np.any(interval_min_b(b[:-1], a[:-1], (a[1:] - a[:-1]) / h, h)
+                      < -CONSISTENCY_RTOL * max(1.0, float(b.max()))):
+                raise ValueError('theta_dot^2 of the quadratic profile goes negative inside an '
+                                 'interval')
         object.__setattr__(self, '_law', self._time_law())
 
     @property
@@ -89,24 +156,23 @@ class ThetaProfile:
         """True if theta_ddot is linear in theta between nodes (node accelerations given)."""
         return self.node_theta_ddot is not None
 
-    @staticmethod
-    def _pieces(th, b, a):
-        """theta and b at the TIME_SUBSTEPS pieces of every interval, ((M,), (M,))."""
-        h = np.diff(th)
-        s = h[:, None] * (np.arange(TIME_SUBSTEPS) / TIME_SUBSTEPS)[None, :]
-        bs = quadratic_b(b[:-1, None], a[:-1, None], a[1:, None], h[:, None], s)
-        theta = np.append((th[:-1, None] + s).ravel(), th[-1])
-        return theta, np.append(np.maximum(bs.ravel(), 0.0), b[-1])
+    def _coefficients(self):
+        """Per interval (N-1,): b0, a0, kappa (b = b0 + 2 a0 s + kappa s^2), h."""
+        h = np.diff(self.theta)
+        b = self.theta_dot ** 2
+        if self.quadratic:
+            a = self.node_theta_ddot
+            return b[:-1], a[:-1], (a[1:] - a[:-1]) / h, h
+        return b[:-1], np.diff(b) / (2.0 * h), np.zeros_like(h), h
 
     def _time_law(self):
-        """Pieces with b linear on each: theta_j, theta_dot_j (M,), t_j (M,)."""
-        if self.quadratic:
-            theta, b = self._pieces(self.theta, self.theta_dot ** 2, self.node_theta_ddot)
-            v = np.sqrt(b)
-        else:
-            theta, v = self.theta, self.theta_dot
-        dt = 2.0 * np.diff(theta) / (v[:-1] + v[1:])
-        return theta, v, np.concatenate([[0.0], np.cumsum(dt)])
+        """Node times t_k (N,) [s] of the exact law."""
+        b0, a0, kappa, h = self._coefficients()
+        dt = time_to(b0, a0, kappa, h, self.theta_dot[1:] ** 2)
+        if not np.all(np.isfinite(dt)):
+            k = int(np.argmax(~np.isfinite(dt)))
+            raise ValueError(f'theta_dot reaches 0 inside interval {k} (no finite time)')
+        return np.concatenate([[0.0], np.cumsum(dt)])
 
     @property
     def theta_ddot(self) -> np.ndarray:
@@ -126,39 +192,48 @@ class ThetaProfile:
 
     @property
     def times(self) -> np.ndarray:
-        """t_k (N,) [s] at the nodes, t_0 = 0."""
-        t = self._law[2]
-        return t[::TIME_SUBSTEPS] if self.quadratic else t
+        """t_k (N,) [s] at the nodes, t_0 = 0 (exact time law)."""
+        return self._law
 
     @property
     def duration(self) -> float:
         """T [s]."""
-        return float(self._law[2][-1])
+        return float(self._law[-1])
 
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """theta, theta_dot, theta_ddot at times ``t`` (M,) [s] in [0, T].
-
-        theta(t) follows the time law (exact for a linear profile: constant theta_ddot per
-        interval, theta = theta_k + theta_dot_k s + a_k s^2 / 2 with s = t - t_k). For a
-        quadratic profile theta_dot and theta_ddot are then those of the quadratic b at that
-        theta.
-        """
-        th, v, tk = self._law
+        """theta, theta_dot, theta_ddot at times ``t`` (M,) [s] in [0, T], exact: theta(t) is
+        the inverse of the exact time law (bisection on the closed form to round-off), and
+        theta_dot, theta_ddot are those of the interpolated profile at that theta."""
+        tk = self._law
         t = np.clip(np.asarray(t, float), 0.0, tk[-1])
-        k = np.clip(np.searchsorted(tk, t, side='right') - 1, 0, th.size - 2)
-        s = t - tk[k]
-        a = (v[k + 1] ** 2 - v[k] ** 2) / (2.0 * (th[k + 1] - th[k]))
-        theta = np.minimum(th[k] + v[k] * s + 0.5 * a * s ** 2, th[k + 1])
-        theta_dot = np.maximum(v[k] + a * s, 0.0)
-        if not self.quadratic:
-            return theta, theta_dot, a
-        i = np.clip(np.searchsorted(self.theta, theta, side='right') - 1, 0,
+        k = np.clip(np.searchsorted(tk, t, side='right') - 1, 0, self.theta.size - 2)
+        b0, a0, kappa, h = (c[k] for c in self._coefficients())
+        tau = t - tk[k]
+        lo, hi = np.zeros_like(tau), h.copy()
+        for _ in range(60):                 # h 2^-60: round-off
+            mid = 0.5 * (lo + hi)
+            later = time_to(b0, a0, kappa, mid) > tau
+            hi = np.where(later, mid, hi)
+            lo = np.where(later, lo, mid)
+        s = np.where(tau <= 0.0, 0.0, np.where(t >= tk[k + 1], h, 0.5 * (lo + hi)))
+        return self.theta[k] + s, self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s
+
+    def _speed(self, k, s, b0, a0, kappa, h):
+        """theta_dot at offset s into interval k; the node values exactly at the nodes."""
+        b = np.sqrt(np.maximum(b0 + 2.0 * a0 * s + kappa * s ** 2, 0.0))
+        return np.where(s <= 0, self.theta_dot[k], np.where(s >= h, self.theta_dot[k + 1], b))
+
+    def theta_at(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """t [s], theta_dot [rad/s], theta_ddot [rad/s^2] of the profile at path parameters
+        ``theta`` (M,) in [0, 2 pi] (exact: the inverse of ``sample``)."""
+        theta = np.clip(np.asarray(theta, float), self.theta[0], self.theta[-1])
+        k = np.clip(np.searchsorted(self.theta, theta, side='right') - 1, 0,
                     self.theta.size - 2)
-        h = self.theta[i + 1] - self.theta[i]
-        a0, a1 = self.node_theta_ddot[i], self.node_theta_ddot[i + 1]
-        sq = theta - self.theta[i]
-        b = quadratic_b(self.theta_dot[i] ** 2, a0, a1, h, sq)
-        return theta, np.sqrt(np.maximum(b, 0.0)), a0 + (a1 - a0) * sq / h
+        b0, a0, kappa, h = (c[k] for c in self._coefficients())
+        s = theta - self.theta[k]
+        b_s = np.where(s >= h, self.theta_dot[k + 1] ** 2, b0 + 2.0 * a0 * s + kappa * s ** 2)
+        return (self._law[k] + time_to(b0, a0, kappa, s, b_s),
+                self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s)
 
     def scaled_in_time(self, factor: float) -> 'ThetaProfile':
         """The same path speed shape run ``factor`` times slower (duration x factor)."""

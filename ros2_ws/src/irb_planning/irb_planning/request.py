@@ -26,7 +26,13 @@ OBJECTIVE_FOURIER = 'fourier'
 OBJECTIVES = (OBJECTIVE_ENERGY, OBJECTIVE_TIME, OBJECTIVE_TRAPEZOID, OBJECTIVE_FOURIER)
 
 PATH_CIRCLE = 'circle'
-GRID_RANGE = (20, 2000)
+MIN_GRID = 20
+#: smallest fraction of the speed/torque limits a request may ask for
+MIN_LIMIT_SCALING = 0.01
+#: radius range [m]: below, the circle is a point for the controller; above, no IRB 1600
+RADIUS_RANGE = (1e-3, 2.0)
+#: |center| coordinates beyond this are not a place the robot can reach [m]
+MAX_COORDINATE = 10.0
 
 
 class PlanError(Exception):
@@ -42,8 +48,8 @@ class PlanError(Exception):
 class PlanRequest:
     """One planning request, SI units (mirrors PlanPath.Request).
 
-    center (3,) [m], radius [m], start_angle [rad], direction +1/-1 (0 = +1); objective one
-    of OBJECTIVES; duration [s] (0 = free); time_weight [J/s]; fourier_order 3/5/7;
+    center (3,) [m], radius [m], start_angle [rad] (reduced to [0, 2 pi)), direction +1/-1;
+    objective one of OBJECTIVES; duration [s] (0 = free); time_weight [J/s]; fourier_order 3/5/7;
     grid_size (0 = planner default); limit_scaling (0 = 1.0) in (0, 1]; friction_map path
     ('' = nominal); boundary 'rest' (default, '') or 'periodic'.
     """
@@ -70,8 +76,9 @@ class PlanRequest:
                 int(self.direction))
 
 
-def validate(req: PlanRequest, default_grid: int) -> PlanRequest:
-    """Check ``req``; return it with defaults filled in, or raise PlanError(INVALID)."""
+def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanRequest:
+    """Check ``req``; return it with defaults filled in and the start angle reduced to
+    [0, 2 pi), or raise PlanError(INVALID) with the reason."""
     def bad(msg):
         raise PlanError(ERROR_INVALID_REQUEST, msg)
 
@@ -86,11 +93,13 @@ def validate(req: PlanRequest, default_grid: int) -> PlanRequest:
         bad('center must have 3 coordinates')
     if req.path_type != PATH_CIRCLE:
         bad(f"path type {req.path_type!r} unknown (only 'circle')")
-    if req.radius <= 0:
-        bad(f'radius must be > 0 m, got {req.radius}')
-    direction = 1 if req.direction == 0 else req.direction
+    if np.any(np.abs(np.asarray(req.center, float)) > MAX_COORDINATE):
+        bad(f'center coordinates must be within +-{MAX_COORDINATE:g} m')
+    if not RADIUS_RANGE[0] <= req.radius <= RADIUS_RANGE[1]:
+        bad(f'radius must be in [{RADIUS_RANGE[0]:g}, {RADIUS_RANGE[1]:g}] m, got {req.radius}')
+    direction = req.direction
     if direction not in (1, -1):
-        bad(f'direction must be +1 or -1, got {req.direction}')
+        bad(f'direction must be +1 (counter-clockwise) or -1 (clockwise), got {req.direction}')
     if req.objective not in OBJECTIVES:
         bad(f'unknown objective {req.objective!r}; one of {list(OBJECTIVES)}')
     if req.duration < 0:
@@ -105,11 +114,12 @@ def validate(req: PlanRequest, default_grid: int) -> PlanRequest:
     if req.objective == OBJECTIVE_FOURIER and req.fourier_order not in ORDERS:
         bad(f'fourier_order must be one of {ORDERS}, got {req.fourier_order}')
     grid = req.grid_size or default_grid
-    if not GRID_RANGE[0] <= grid <= GRID_RANGE[1]:
-        bad(f'grid_size must be in {list(GRID_RANGE)}, got {grid}')
+    if not MIN_GRID <= grid <= max_grid:
+        bad(f'grid_size must be in [{MIN_GRID}, {max_grid}] (planner parameter max_grid_size), '
+            f'got {grid}')
     scaling = req.limit_scaling or 1.0
-    if not 0 < scaling <= 1:
-        bad(f'limit_scaling must be in (0, 1], got {req.limit_scaling}')
+    if not MIN_LIMIT_SCALING <= scaling <= 1:
+        bad(f'limit_scaling must be in [{MIN_LIMIT_SCALING:g}, 1], got {req.limit_scaling}')
     boundary = req.boundary or BOUNDARY_REST
     if req.objective == OBJECTIVE_FOURIER:
         if req.boundary and req.boundary != BOUNDARY_PERIODIC:
@@ -119,5 +129,10 @@ def validate(req: PlanRequest, default_grid: int) -> PlanRequest:
         bad(f'unknown boundary {req.boundary!r}; one of {list(BOUNDARIES)}')
     if not math.isfinite(req.duration):
         bad('duration is not finite')
-    return replace(req, center=np.asarray(req.center, float), direction=direction,
-                   grid_size=grid, limit_scaling=scaling, boundary=boundary)
+    # the angle of the start point, reduced exactly (fmod is exact in floating point): a huge
+    # angle would otherwise leave no digits for theta in cos(s theta + phi0)
+    start = math.fmod(float(req.start_angle), 2 * math.pi)
+    start = start + 2 * math.pi if start < 0 else start
+    return replace(req, center=np.asarray(req.center, float), direction=int(direction),
+                   start_angle=start, grid_size=grid, limit_scaling=scaling,
+                   boundary=boundary)

@@ -15,8 +15,13 @@ moves it by < 0.2 % (benchmarks/bench_timing.py).
     T = the profile's time law (profile.TIME_SUBSTEPS pieces per interval)       [s]
     tau(theta) = m a + c b + g + tau_f(Phi' sqrt b)      (problem.PathDynamics)
     s.t.  T = T_req (fixed duration) or T free (time-energy trade-off, w_T = time weight)
-          delta^2 <= b inside the path (nodes and pieces); b <= speed bound at nodes and
-          midpoints; |tau| <= tau_max at every node and midpoint
+          theta_dot >= delta everywhere inside the path, between the samples too:
+            b - max(0, a_{k+1} - a_k) h_k / 64 >= delta^2 at the nodes and the three
+            quarter points of every interval (on a quarter piece a convex quadratic dips at
+            most b'' (h/4)^2 / 8 = (a_{k+1} - a_k) h / 64 below its end values; written as two
+            linear rows); on a rest interval b(s) >= delta^2 s / h (leaving rest takes at most
+            twice the time at delta): a_0 >= delta^2 / (2 h_0), a_{N-1} <= -delta^2 / (2 h)
+          b <= speed bound at nodes and midpoints; |tau| <= tau_max at every node and midpoint
           boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}, a_0 = a_{N-1}
 
 |y| is exact: epigraph variables e >= +-y with sum e minimised (no bias at the optimum), or,
@@ -169,8 +174,12 @@ class Transcription:
 
         # --- path constraints (rows; bounds are set per solve) ---------------------------
         collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * D     # = 0 (b' = 2 a, exact)
+        # theta_dot >= delta between the samples: b at the 5 points of an interval minus the
+        # largest dip of a convex quadratic between them (rows >= delta^2, interior intervals)
+        dip = (a[1:] - a[:-1]) * D / (4 * TIME_SUBSTEPS ** 2)
+        dip_rows = ca.vertcat(*[bj - dip for bj in [b[:-1]] + b_sub + [b[1:]]])
         g_rows = [duration, collocation, ca.vertcat(*b_sub), b_mid, ca.vec(tau_n),
-                  ca.vec(tau_m), rev_rows]
+                  ca.vec(tau_m), rev_rows, dip_rows]
         if use_epi:
             g_rows += [y - e_pos + e_neg]            # = 0
         g = ca.vertcat(*g_rows)
@@ -198,8 +207,14 @@ class Transcription:
             lbb, ubb = np.full(N - 2, lo), beta_n[1:-1]
         else:
             lbb, ubb = np.full(N - 1, lo), beta_n[:-1]
-        lbx = np.concatenate([lbb, np.full(self._na, -np.inf), np.zeros(self._ne)])
-        ubx = np.concatenate([ubb, np.full(self._na, np.inf), np.full(self._ne, np.inf)])
+        lba, uba = np.full(self._na, -np.inf), np.full(self._na, np.inf)
+        if self.boundary == BOUNDARY_REST:
+            # leave and reach rest no slower than b(s) = delta^2 s / h (finite, short time)
+            h = np.diff(self.nodes.theta)
+            lba[0] = lo / (2 * h[0])
+            uba[-1] = -lo / (2 * h[-1])
+        lbx = np.concatenate([lbb, lba, np.zeros(self._ne)])
+        ubx = np.concatenate([ubb, uba, np.full(self._ne, np.inf)])
         if req.duration > 0:
             lt, ut = req.duration, req.duration
         else:
@@ -212,9 +227,13 @@ class Transcription:
         tau_lim = np.asarray(req.torque_limit, float)
         tau_n, tau_m = np.tile(tau_lim, N), np.tile(tau_lim, K)
         tau_rev = np.tile(tau_lim[self._rev_joint] - self._breakaway[self._rev_joint], 3)
+        lo_dip = np.full(K, lo)
+        if self.boundary == BOUNDARY_REST:
+            lo_dip[0] = lo_dip[-1] = -np.inf      # the rest intervals have their own rows
         lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_sub), np.zeros(K), -tau_n, -tau_m,
-               -tau_rev]
-        ubg = [[ut], np.zeros(K), np.full(n_sub * K, np.inf), beta_m, tau_n, tau_m, tau_rev]
+               -tau_rev, np.tile(lo_dip, n_sub + 2)]
+        ubg = [[ut], np.zeros(K), np.full(n_sub * K, np.inf), beta_m, tau_n, tau_m, tau_rev,
+               np.full((n_sub + 2) * K, np.inf)]
         if self._ne:
             lbg += [np.zeros(self._ne // 2)]
             ubg += [np.zeros(self._ne // 2)]

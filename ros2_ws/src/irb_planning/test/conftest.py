@@ -14,8 +14,15 @@ def model() -> RobotModel:
 
 
 @pytest.fixture(scope='session')
-def planner(model) -> Planner:
-    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID))
+def map_dir(tmp_path_factory):
+    """A directory the test planners may read friction maps from."""
+    return tmp_path_factory.mktemp('maps')
+
+
+@pytest.fixture(scope='session')
+def planner(model, map_dir) -> Planner:
+    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID,
+                                                 friction_map_dirs=(str(map_dir),)))
 
 
 @pytest.fixture

@@ -20,6 +20,7 @@ from irb_planning.request import PlanError, PlanRequest, validate
     (dict(duration=2.0, grid_size=5), 'grid_size'),
     (dict(duration=2.0, limit_scaling=1.5), 'limit_scaling'),
     (dict(duration=2.0, direction=3), 'direction'),
+    (dict(duration=2.0, direction=0), 'direction'),
     (dict(duration=2.0, boundary='loop'), 'boundary'),
     (dict(duration=2.0, time_weight=float('nan')), 'time_weight'),
 ])
@@ -31,9 +32,9 @@ def test_invalid_requests_are_refused_with_a_reason(kwargs, text):
 
 
 def test_defaults_are_filled_in():
-    req = validate(PlanRequest(duration=2.0, direction=0), 150)
+    req = validate(PlanRequest(duration=2.0, direction=-1), 150)
     assert (req.grid_size, req.limit_scaling, req.boundary, req.direction) == (
-        150, 1.0, 'rest', 1)
+        150, 1.0, 'rest', -1)
     four = validate(PlanRequest(objective='fourier', fourier_order=5, duration=2.0), 150)
     assert four.boundary == 'periodic'
 

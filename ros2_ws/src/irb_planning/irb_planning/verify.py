@@ -1,0 +1,310 @@
+"""The independent check of a plan as a controller will play it (numpy/scipy only, no ROS).
+
+It receives what the service returns, not the optimiser's internals: the trajectory message's
+points (t, q, qd, qdd), the theta profile (node theta, theta_dot, theta_ddot), the circle as
+numbers, the DH table and limits as numbers, a rigid-body torque function and the friction
+map as the file's mapping. It shares no code with the optimiser, the model's IK or the
+profile's time law:
+
+* **time law**: the message's stamps against its own integration of dtheta / theta_dot
+  (adaptive Gauss-Kronrod, scipy ``quad``, with the 1/sqrt weight at rest ends) of the profile
+  as interpolated (b = theta_dot^2 quadratic between nodes with the node theta_ddot), on every
+  segment between consecutive points; theta of each point from its own FK (DH product) and
+  atan2 about the centre (thesis eq. 5.6);
+* **as played**: quintic Hermite interpolation between the points (what a joint-trajectory
+  controller does with positions, velocities and accelerations), sampled at ``rate_hz`` and at
+  least ``min_samples_per_segment`` per segment; the TCP by its own DH forward kinematics, its
+  distance to the circle;
+* **continuity**: no joint moves between two points by more than their velocities and
+  accelerations allow (a wrap of joint 1 at +-180 deg is a jump of 2 pi);
+* **limits** along the played trajectory: positions, speeds, torques = rigid body (the given
+  function, pinocchio RNEA on the URDF in the planner) + friction evaluated from the map's
+  numbers here;
+* **energy** of the played trajectory, int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import warnings
+
+import numpy as np
+from scipy.integrate import IntegrationWarning, quad
+
+#: relative tolerance of limit checks (round-off, not a margin)
+LIMIT_RTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Horizontal circle: center (3,) [m], radius [m], start angle [rad], direction +-1."""
+
+    center: np.ndarray
+    radius: float
+    start_angle: float
+    direction: int
+
+    def deviation(self, p: np.ndarray) -> np.ndarray:
+        """Distance [m] of points p (M, 3) from the circle."""
+        d = p - self.center
+        return np.hypot(np.hypot(d[:, 0], d[:, 1]) - self.radius, d[:, 2])
+
+    def theta(self, p: np.ndarray) -> np.ndarray:
+        """theta (M,) [rad] of points along a sequence, unwrapped from 0 (eq. 5.6)."""
+        d = p - self.center
+        ang = self.direction * (np.arctan2(d[:, 1], d[:, 0]) - self.start_angle)
+        ang = np.unwrap(ang)
+        return ang - 2 * np.pi * np.round(ang[0] / (2 * np.pi))
+
+
+@dataclass(frozen=True)
+class ArmKinematics:
+    """DH table (6,) each [m]/[rad], and the limits (3,) checked: lower/upper [rad],
+    velocity [rad/s], torque [N m]. Joints 4-6 are at 0 (the simplified model)."""
+
+    a: np.ndarray
+    alpha: np.ndarray
+    d: np.ndarray
+    offset: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    torque: np.ndarray
+
+    def tcp(self, q: np.ndarray) -> np.ndarray:
+        """TCP positions (M, 3) [m] of joint angles q (M, 3): the DH product A1...A6."""
+        M = q.shape[0]
+        q6 = np.zeros((M, 6))
+        q6[:, :q.shape[1]] = q
+        T = np.broadcast_to(np.eye(4), (M, 4, 4)).copy()
+        for i in range(6):
+            th = q6[:, i] + self.offset[i]
+            ct, st = np.cos(th), np.sin(th)
+            ca, sa = np.cos(self.alpha[i]), np.sin(self.alpha[i])
+            A = np.zeros((M, 4, 4))
+            A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, self.a[i] * ct
+            A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, self.a[i] * st
+            A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, self.d[i]
+            A[:, 3, 3] = 1.0
+            T = T @ A
+        return T[:, :3, 3]
+
+
+class MapFriction:
+    """Friction torque from a friction-map file's ``joints`` mapping, evaluated here.
+
+    Per joint: sign(v) (F_c + (F_s - F_c) exp(-(v/v_s)^2)) + F_v v, with separate Coulomb and
+    static levels per sign and an offset where the map has them; inside ``valid_range`` the
+    per-sign polynomials when present (increasing powers of v)."""
+
+    def __init__(self, joints: dict, names: list[str]):
+        self.params = [joints[n] for n in names]
+
+    @staticmethod
+    def _joint(p: dict, v: np.ndarray) -> np.ndarray:
+        fc = float(p['coulomb'])
+        fs = float(p.get('static', fc))
+        vs = float(p.get('stribeck_velocity', 0.05))
+        fcp, fcn = float(p.get('coulomb_positive', fc)), float(p.get('coulomb_negative', fc))
+        fsp = float(p.get('static_positive', fs - fc + fcp))
+        fsn = float(p.get('static_negative', fs - fc + fcn))
+        e = np.exp(-(v / vs) ** 2)
+        level = np.where(v > 0, fcp + (fsp - fcp) * e, fcn + (fsn - fcn) * e)
+        out = np.sign(v) * level + float(p['viscous']) * v + float(p.get('offset', 0.0))
+        if 'polynomial_positive' in p and 'polynomial_negative' in p:
+            lo, hi = (float(x) for x in p.get('valid_range', (0.0, np.inf)))
+            inside = (np.abs(v) >= lo) & (np.abs(v) <= hi)
+            for key, side in (('polynomial_positive', v > 0), ('polynomial_negative', v < 0)):
+                poly = np.zeros_like(v)
+                for power, c in enumerate(p[key]):
+                    poly = poly + float(c) * v ** power
+                out = np.where(inside & side, poly, out)
+        return out
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        v = np.atleast_2d(v)
+        return np.stack([self._joint(p, v[:, i]) for i, p in enumerate(self.params)], axis=1)
+
+
+@dataclass
+class Verification:
+    """Outcome: ok, problems (one line each); max_path_deviation [m] of the played TCP;
+    max_time_error [-] relative, per segment; energy [J], duration [s], peak torque/speed
+    (n,) of the played trajectory; the played samples t, q, qd, qdd, tau."""
+
+    problems: list[str]
+    max_path_deviation: float
+    max_time_error: float
+    energy: float
+    duration: float
+    peak_torque: np.ndarray
+    peak_speed: np.ndarray
+    t: np.ndarray = field(repr=False, default=None)
+    q: np.ndarray = field(repr=False, default=None)
+    qd: np.ndarray = field(repr=False, default=None)
+    qdd: np.ndarray = field(repr=False, default=None)
+    tau: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def profile_segment_time(theta_nodes, theta_dot, theta_ddot, th0: float, th1: float,
+                         quadratic: bool = True) -> float:
+    """Own integration of dtheta / theta_dot from th0 to th1 [rad] over the profile whose
+    b = theta_dot^2 is quadratic between nodes (b' = 2 theta_ddot, theta_ddot linear between
+    the node values) or, if not ``quadratic``, linear between nodes (theta_ddot constant)."""
+    if not quadratic:     # the slope of b on each interval, at both of its ends
+        slope = np.diff(np.asarray(theta_dot) ** 2) / (2 * np.diff(theta_nodes))
+        theta_ddot = (slope, slope)
+    else:
+        theta_ddot = (theta_ddot[:-1], theta_ddot[1:])
+    with warnings.catch_warnings():       # quad's round-off notes: the error is checked
+        warnings.simplefilter('ignore', IntegrationWarning)
+        return _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1)
+
+
+def _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1):
+    total = 0.0
+    k0 = max(int(np.searchsorted(theta_nodes, th0, side='right')) - 1, 0)
+    k1 = min(int(np.searchsorted(theta_nodes, th1, side='left')), theta_nodes.size - 1)
+    for k in range(k0, k1):
+        lo, hi = max(th0, theta_nodes[k]), min(th1, theta_nodes[k + 1])
+        if hi <= lo:
+            continue
+        h = theta_nodes[k + 1] - theta_nodes[k]
+        b0, a0, a1 = theta_dot[k] ** 2, theta_ddot[0][k], theta_ddot[1][k]
+
+        def b(x, b0=b0, a0=a0, a1=a1, h=h, k=k):
+            s = x - theta_nodes[k]
+            return b0 + 2 * a0 * s + (a1 - a0) * s * s / h
+        left_rest = theta_dot[k] == 0 and lo == theta_nodes[k]
+        right_rest = theta_dot[k + 1] == 0 and hi == theta_nodes[k + 1]
+        if left_rest:          # integrand ~ 1/sqrt(x - lo): alg weight, smooth remainder
+            val = quad(lambda x: np.sqrt((x - lo) / max(b(x), 1e-300)) if x > lo else
+                       1 / np.sqrt(2 * a0), lo, hi, weight='alg', wvar=(-0.5, 0.0),
+                       epsabs=0.0, epsrel=1e-10, limit=200)[0]
+        elif right_rest:
+            val = quad(lambda x: np.sqrt((hi - x) / max(b(x), 1e-300)) if x < hi else
+                       1 / np.sqrt(-2 * a1), lo, hi, weight='alg', wvar=(0.0, -0.5),
+                       epsabs=0.0, epsrel=1e-10, limit=200)[0]
+        else:
+            val = quad(lambda x: 1 / np.sqrt(max(b(x), 1e-300)), lo, hi, epsabs=0.0,
+                       epsrel=1e-10, limit=200)[0]
+        total += val
+    return total
+
+
+def quintic(t0, t1, p0, p1, rate: float, min_samples: int):
+    """Sample the quintic Hermite segments between points (positions, velocities,
+    accelerations p0/p1 = (q, qd, qdd), each (K, n)) over [t0, t1] (K,): (t, q, qd, qdd)."""
+    q0, v0, a0 = p0
+    q1, v1, a1 = p1
+    out = [[] for _ in range(4)]
+    for k in range(t0.size):
+        T = t1[k] - t0[k]
+        m = max(min_samples, int(np.ceil(T * rate)))
+        s = np.arange(m) / m * T
+        # q(s) = c0 + c1 s + ... + c5 s^5 matching q, qd, qdd at both ends
+        c0, c1, c2 = q0[k], v0[k], 0.5 * a0[k]
+        d = q1[k] - (c0 + c1 * T + c2 * T ** 2)
+        e = v1[k] - (c1 + 2 * c2 * T)
+        f = a1[k] - 2 * c2
+        c3 = (10 * d - 4 * e * T + 0.5 * f * T ** 2) / T ** 3
+        c4 = (-15 * d + 7 * e * T - f * T ** 2) / T ** 4
+        c5 = (6 * d - 3 * e * T + 0.5 * f * T ** 2) / T ** 5
+        S = s[:, None]
+        out[0].append(t0[k] + s)
+        out[1].append(c0 + c1 * S + c2 * S ** 2 + c3 * S ** 3 + c4 * S ** 4 + c5 * S ** 5)
+        out[2].append(c1 + 2 * c2 * S + 3 * c3 * S ** 2 + 4 * c4 * S ** 3 + 5 * c5 * S ** 4)
+        out[3].append(2 * c2 + 6 * c3 * S + 12 * c4 * S ** 2 + 20 * c5 * S ** 3)
+    return [np.concatenate(x) for x in out]
+
+
+def verify_plan(t, q, qd, qdd, profile, circle: Circle, kin: ArmKinematics,
+                rigid_torque: Callable, friction: Callable, rest: bool,
+                rate_hz: float = 1000.0, min_samples_per_segment: int = 8,
+                path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6) -> Verification:
+    """Check a plan's trajectory message as played (see module docstring).
+
+    t (K,) [s]; q, qd, qdd (K, n); profile = (theta, theta_dot, theta_ddot, quadratic): node
+    arrays and whether theta_ddot is linear between nodes (else b is);
+    rigid_torque(q, qd, qdd) (M, n) -> (M, n); friction(v (M, n)) -> (M, n).
+    """
+    problems = []
+    t, q, qd, qdd = (np.asarray(x, float) for x in (t, q, qd, qdd))
+    th_n, thd_n, thdd_n = (np.asarray(x, float) for x in profile[:3])
+    quadratic = bool(profile[3])
+    n = q.shape[1]
+    if not all(np.all(np.isfinite(x)) for x in (t, q, qd, qdd)):
+        return Verification(['non-finite values in the trajectory'], np.inf, np.inf, np.nan,
+                            np.nan, np.full(n, np.nan), np.full(n, np.nan))
+    if t.size < 2 or np.any(np.diff(t) <= 0):
+        return Verification(['time stamps not strictly increasing'], np.inf, np.inf, np.nan,
+                            np.nan, np.full(n, np.nan), np.full(n, np.nan))
+    # --- the points: on the path, their theta, the time law -----------------------------
+    p = kin.tcp(q)
+    dev_pts = circle.deviation(p)
+    if dev_pts.max() > 1e-6:
+        k = int(np.argmax(dev_pts))
+        problems.append(f'point {k} (t = {t[k]:.3f} s) is {dev_pts[k] * 1e3:.3f} mm off the '
+                        'path')
+    theta = circle.theta(p)
+    if abs(theta[0]) > 1e-6 or abs(theta[-1] - 2 * np.pi) > 1e-6 or np.any(np.diff(theta) < 0):
+        problems.append('the points do not run once around the circle in order '
+                        f'(theta {theta[0]:.4f} .. {theta[-1]:.4f} rad)')
+    theta = np.clip(theta, 0.0, 2 * np.pi)
+    worst_time = 0.0
+    for k in range(t.size - 1):
+        expected = profile_segment_time(th_n, thd_n, thdd_n, theta[k], theta[k + 1], quadratic)
+        err = abs((t[k + 1] - t[k]) - expected) / max(expected, 1e-12)
+        if err > worst_time:
+            worst_time, k_time = err, k
+    if worst_time > time_rtol:
+        problems.append(f'time stamps disagree with the profile: segment {k_time} '
+                        f'(t = {t[k_time]:.3f} s) off by {worst_time:.2e} relative')
+    # --- continuity between points ------------------------------------------------------
+    dt = np.diff(t)[:, None]
+    reach = (0.5 * (np.abs(qd[:-1]) + np.abs(qd[1:])) * dt
+             + 0.5 * np.maximum(np.abs(qdd[:-1]), np.abs(qdd[1:])) * dt ** 2)
+    jump = np.abs(np.diff(q, axis=0)) - 1.5 * reach - 1e-6
+    if np.any(jump > 0):
+        k, i = np.unravel_index(int(np.argmax(jump)), jump.shape)
+        problems.append(f'joint {i + 1} jumps by {np.degrees(abs(q[k + 1, i] - q[k, i])):.1f} '
+                        f'deg between points {k} and {k + 1} (t = {t[k]:.3f} s)')
+    if rest and (np.abs(qd[0]).max() > 1e-9 or np.abs(qd[-1]).max() > 1e-9):
+        problems.append('a rest-to-rest plan does not start and end at rest')
+    # --- as played ------------------------------------------------------------------------
+    ts, qs, qds, qdds = quintic(t[:-1], t[1:], (q[:-1], qd[:-1], qdd[:-1]),
+                                (q[1:], qd[1:], qdd[1:]), rate_hz, min_samples_per_segment)
+    ts, qs, qds, qdds = (np.concatenate([x, y[-1:]]) for x, y in
+                         ((ts, t), (qs, q), (qds, qd), (qdds, qdd)))
+    dev = circle.deviation(kin.tcp(qs))
+    k = int(np.argmax(dev))
+    if dev[k] > path_tolerance_m:
+        problems.append(f'played by quintic interpolation the TCP leaves the path by '
+                        f'{dev[k] * 1e3:.3f} mm at t = {ts[k]:.3f} s (> '
+                        f'{path_tolerance_m * 1e3:g} mm)')
+    tau = np.asarray(rigid_torque(qs, qds, qdds), float) + friction(qds)
+    peak_tau, peak_v = np.abs(tau).max(axis=0), np.abs(qds).max(axis=0)
+    for i in range(n):
+        if np.any(qs[:, i] < kin.lower[i] - 1e-9) or np.any(qs[:, i] > kin.upper[i] + 1e-9):
+            j = int(np.argmax(np.maximum(kin.lower[i] - qs[:, i], qs[:, i] - kin.upper[i])))
+            problems.append(f'joint {i + 1} at {np.degrees(qs[j, i]):.2f} deg leaves its limits '
+                            f'[{np.degrees(kin.lower[i]):.0f}, {np.degrees(kin.upper[i]):.0f}] '
+                            f'at t = {ts[j]:.3f} s')
+        if peak_v[i] > kin.velocity[i] * (1 + LIMIT_RTOL):
+            j = int(np.argmax(np.abs(qds[:, i])))
+            problems.append(f'joint {i + 1} speed {peak_v[i]:.3f} rad/s > '
+                            f'{kin.velocity[i]:.3f} at t = {ts[j]:.3f} s')
+        if peak_tau[i] > kin.torque[i] * (1 + LIMIT_RTOL):
+            j = int(np.argmax(np.abs(tau[:, i])))
+            problems.append(f'joint {i + 1} torque {peak_tau[i]:.2f} N m > '
+                            f'{kin.torque[i]:.2f} at t = {ts[j]:.3f} s')
+    if not np.all(np.isfinite(tau)):
+        problems.append('non-finite torque')
+    energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
+    return Verification(problems, float(dev.max()), float(worst_time), energy,
+                        float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau)
