@@ -257,7 +257,9 @@ def main(args=None) -> int:
                 params['friction_map_file'] = str(fmap)
             return ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', params=params))
 
-        planner = ProcessSpec('planner', ros2_run_cmd('irb_planning', 'planner'))
+        # the identified map lives in this run's directory: let the planner read it there
+        planner = ProcessSpec('planner', ros2_run_cmd(
+            'irb_planning', 'planner', params={'friction_map_dirs': f"['{out}']"}))
         log(f'3/{PHASES} energy-optimal and trapezoidal circles '
             f'({cfg["circle_duration_s"]} s) with the identified compensation')
         g = graph([sim, controller('file'), planner])

@@ -62,6 +62,7 @@ class PlannerSettings:
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
     cache_size: int = 8                  # built problems kept (LRU)
+    memory_limit_mib: float = 400.0      # drop least recently used problems above this RSS
     friction_map_dirs: tuple = ()        # where maps may be read from; () = default_map_dirs()
     path_tolerance_m: float = 1e-4       # TCP deviation of the message played quintically
     max_trajectory_points: int = 20000   # message points at most
@@ -196,15 +197,23 @@ class Planner:
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
-        evicted = False
         with self._cache_lock:
             self._cache[key] = entry
             while len(self._cache) > s.cache_size:
                 self._cache.popitem(last=False)
-                evicted = True
-        if evicted:
-            release_memory()
+        self._trim_cache()
         return entry
+
+    def _trim_cache(self) -> None:
+        """Drop least recently used problems (never the newest) while the process's resident
+        memory is above memory_limit_mib, giving the freed heap back to the OS."""
+        release_memory()
+        while resident_mib() > self.settings.memory_limit_mib:
+            with self._cache_lock:
+                if len(self._cache) <= 1:
+                    return
+                self._cache.popitem(last=False)
+            release_memory()
 
     def _limits(self, req: PlanRequest, fm: FrictionMap) -> tuple[SolveRequest, LimitSet]:
         """(limits for the NLP with margin, limits the evaluator checks)."""
@@ -216,13 +225,14 @@ class Planner:
                            tau * keep)
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
-    def _solve_checked(self, entry: _Entry, sreq: SolveRequest, checked: LimitSet, sample,
-                       torque, fixed_duration: float, solve=None):
-        """Solve, rescale the profile to the exact ``fixed_duration`` (0 = keep its own),
-        evaluate; where a limit is broken (exact map vs the NLP's smooth one, torque between
-        grid points), tighten that limit by the measured excess and solve again.
-        Returns (result, profile, evaluation, notes); raises PlanError if the solver fails."""
-        solve = solve or entry.transcription.solve
+    def _solve_checked(self, sreq: SolveRequest, checked: LimitSet, check, solve,
+                       fixed_duration: float):
+        """Solve, rescale the profile to the exact ``fixed_duration`` (0 = keep its own) and
+        ``check`` it (1 kHz evaluation and the independent check of its message); where a
+        speed or torque limit is broken (the exact map against the NLP's smooth one, torque
+        between grid points), tighten that limit by the measured excess and solve again, at
+        most adapt_rounds times. Returns (result, profile, (evaluation, trajectory,
+        verification), notes); raises PlanError if the solver fails."""
         notes = []
         for attempt in range(self.settings.adapt_rounds + 1):
             res = solve(sreq)
@@ -233,23 +243,27 @@ class Planner:
             profile = res.profile
             for _ in range(2 if fixed_duration > 0 else 0):     # 2nd pass: round-off
                 profile = profile.scaled_in_time(fixed_duration / profile.duration)
-            ev = evaluate(profile, sample, torque, checked, self.settings.evaluation_rate_hz)
-            over_tau = ev.peak_torque - checked.torque
-            over_v = ev.peak_speed - checked.velocity
-            if ev.ok or attempt == self.settings.adapt_rounds:
-                return res, profile, ev, notes
+            checks = check(profile)
+            ev, _, ver = checks
+            if (ev.ok and ver.ok) or attempt == self.settings.adapt_rounds:
+                return res, profile, checks, notes
+            over_tau = np.maximum(ev.peak_torque, ver.peak_torque) - checked.torque
+            over_v = np.maximum(ev.peak_speed, ver.peak_speed) - checked.velocity
+            if not (np.any(over_tau > 0) or np.any(over_v > 0)):
+                return res, profile, checks, notes          # not a limit: nothing to tighten
             tau = np.where(over_tau > 0, sreq.torque_limit - over_tau - 1e-3 * checked.torque,
                            sreq.torque_limit)
             vel = np.where(over_v > 0, sreq.velocity_limit - over_v - 1e-3 * checked.velocity,
                            sreq.velocity_limit)
-            notes.append('limits tightened after the exact check: ' + '; '.join(ev.violations))
+            notes.append('limits tightened after the exact check: '
+                         + '; '.join(ev.violations + ver.problems))
             sreq = replace(sreq, torque_limit=tau, velocity_limit=vel)
         raise AssertionError('unreachable')
 
-    def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, sample,
-                     torque) -> tuple[float, tuple]:
-        """Time-optimal duration [s] (exact time law of a profile that passes the 1 kHz
-        check) and (result, profile, evaluation, notes); cached per limits."""
+    def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, check
+                     ) -> tuple[float, tuple]:
+        """Time-optimal duration [s] (exact time law of a profile that passes the checks)
+        and ``_solve_checked``'s output for it; cached per limits."""
         key = (base.min_theta_dot, tuple(base.velocity_limit), tuple(base.torque_limit))
         with entry.lock:
             if key in entry.min_duration:
@@ -257,16 +271,17 @@ class Planner:
         req = SolveRequest(0.0, 1.0, TIME_OBJECTIVE_ENERGY_WEIGHT, base.min_theta_dot,
                            base.velocity_limit, base.torque_limit)
         try:
-            out = self._solve_checked(entry, req, checked, sample, torque, 0.0,
-                                      lambda r: entry.transcription.solve(r, warm=False))
+            out = self._solve_checked(req, checked, check,
+                                      lambda r: entry.transcription.solve(r, warm=False), 0.0)
         except PlanError as exc:
             infeasible = 'cannot all be met' in exc.message
             raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
                             f'time-optimal problem: {exc.message}') from None
-        if out[2].violations:
-            raise PlanError(ERROR_SOLVER, 'the time-optimal profile breaks a limit after '
+        ev, _, ver = out[2]
+        if ev.violations or not ver.ok:
+            raise PlanError(ERROR_SOLVER, 'the time-optimal profile fails the checks after '
                             f'{self.settings.adapt_rounds} tightened re-solves: '
-                            + '; '.join(out[2].violations))
+                            + '; '.join(ev.violations + ver.problems))
         value = (out[1].duration, out)
         with entry.lock:
             entry.min_duration[key] = value
@@ -320,6 +335,12 @@ class Planner:
     # --- the request --------------------------------------------------------------------
     def plan(self, request: PlanRequest) -> PlanResult:
         """Plan ``request`` (see module docstring); raises PlanError."""
+        try:
+            return self._plan(request)
+        finally:
+            release_memory()       # the request's 1 kHz arrays: back to the OS, not the arena
+
+    def _plan(self, request: PlanRequest) -> PlanResult:
         s = self.settings
         req = validate(request, s.grid_size, s.max_grid_size)
         fm, raw_map = self.friction_map(req.friction_map)
@@ -329,7 +350,11 @@ class Planner:
         base, checked = self._limits(req, fm)
         sample = self.sample_path(path)
         torque = self.torque(fm)
-        t_min, t_out = self.min_duration(entry, base, checked, sample, torque)
+
+        def check(profile):
+            ev = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz)
+            return (ev, *self.trajectory(profile, req, path, fm, raw_map, checked))
+        t_min, t_out = self.min_duration(entry, base, checked, check)
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
             raise PlanError(ERROR_INFEASIBLE_DURATION,
                             f'duration {req.duration:.4f} s is shorter than the time-optimal '
@@ -345,35 +370,33 @@ class Planner:
         coeffs = None
         t0 = time.perf_counter()
         if req.objective == OBJECTIVE_TIME:
-            res, profile, evaluation, notes = t_out
+            res, profile, checks, notes = t_out
+            notes = list(notes)
             e_opt, stats = res.energy, res.stats
         elif req.objective == OBJECTIVE_TRAPEZOID:
             profile = trapezoid_profile(req.duration, s.trapezoid_ramp_fraction)
             e_opt, stats, notes = float('nan'), None, []
-            evaluation = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz)
-            if evaluation.violations:
+            checks = check(profile)
+            if checks[0].violations:
                 raise PlanError(ERROR_INFEASIBLE_DURATION, 'the trapezoid at this duration '
-                                'breaks a limit: ' + '; '.join(evaluation.violations))
+                                'breaks a limit: ' + '; '.join(checks[0].violations))
         else:
             sreq = SolveRequest(req.duration, req.time_weight, 1.0, base.min_theta_dot,
                                 base.velocity_limit, base.torque_limit)
-            solve = None
+            solve = entry.transcription.solve
             if req.objective != OBJECTIVE_ENERGY:
-                problem = self.fourier_problem(entry, req.fourier_order, sample)
-                solve = problem.solve
-            res, profile, evaluation, notes = self._solve_checked(
-                entry, sreq, checked, sample, torque, req.duration, solve)
+                solve = self.fourier_problem(entry, req.fourier_order, sample).solve
+            res, profile, checks, notes = self._solve_checked(sreq, checked, check, solve,
+                                                              req.duration)
             coeffs = getattr(res, 'coeffs', None)
             e_opt, stats = res.energy, res.stats
-            if evaluation.violations:
-                raise PlanError(ERROR_SOLVER, f'{req.objective} plan breaks a limit at '
-                                f'{s.evaluation_rate_hz:g} Hz after {s.adapt_rounds} '
-                                'tightened re-solves: ' + '; '.join(evaluation.violations))
+        evaluation, trajectory, verification = checks
         elapsed = time.perf_counter() - t0
-        trajectory, verification = self.trajectory(profile, req, path, fm, raw_map, checked)
-        if not verification.ok:
-            raise PlanError(ERROR_SOLVER, 'the plan failed the independent check and is not '
-                            'returned: ' + '; '.join(verification.problems))
+        if evaluation.violations or not verification.ok:
+            raise PlanError(ERROR_SOLVER, f'the {req.objective} plan fails the independent '
+                            f'check and is not returned (after {s.adapt_rounds} re-solves '
+                            'with tightened limits): '
+                            + '; '.join(evaluation.violations + verification.problems))
         baseline = evaluation if req.objective == OBJECTIVE_TRAPEZOID else evaluate(
             trapezoid_profile(evaluation.duration, s.trapezoid_ramp_fraction), sample,
             torque, checked, s.evaluation_rate_hz)
@@ -396,9 +419,9 @@ class Planner:
                    ) -> tuple[dict, Verification]:
         """The message's points and their independent check: the profile's nodes, each
         interval split into m equal theta pieces (m = 1, 2, 4, ...) until the trajectory
-        played by quintic interpolation stays within path_tolerance_m / 2 of the path (or
-        the point budget is used; the check then says whether it is still within
-        path_tolerance_m)."""
+        played by quintic interpolation stays within path_tolerance_m / 2 of the path, or the
+        point budget is used (the check then says whether it is within path_tolerance_m).
+        Limits the check finds broken are for ``_solve_checked`` to fix."""
         s = self.settings
         sample, torque = self.sample_path(path), self.torque(fm)
         kin = ArmKinematics(velocity=checked.velocity, torque=checked.torque, **self._kin)
@@ -437,6 +460,18 @@ class Planner:
     def node_samples(self, result: PlanResult) -> dict:
         """The plan's trajectory message points (checked): t (K,) [s]; q, qd, qdd, tau (K, n)."""
         return result.trajectory
+
+
+def resident_mib() -> float:
+    """Resident memory of this process [MiB] (Linux /proc; 0 where unknown)."""
+    try:
+        with open('/proc/self/status') as f:
+            for line in f:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
 
 
 def release_memory() -> None:

@@ -44,6 +44,8 @@ PARAMETERS = {
                                 'trapezoid baseline: each ramp as a fraction of T [-]'),
     'evaluation_rate_hz': ('evaluation_rate_hz', 'resampling rate of the check [Hz]'),
     'cache_size': ('cache_size', 'built problems kept (least recently used dropped) [-]'),
+    'memory_limit_mib': ('memory_limit_mib', 'built problems are dropped (least recently used '
+                         'first) while the resident memory exceeds this [MiB]'),
     'max_grid_size': ('max_grid_size', 'largest grid_size a request may ask for [-]'),
     'path_tolerance_m': ('path_tolerance_m', 'largest TCP deviation of the trajectory message '
                          'played by quintic interpolation (else more points) [m]'),

@@ -189,9 +189,10 @@ class Transcription:
         nlp = {'x': x, 'p': p, 'f': f, 'g': g}
         self._solver_cold = ca.nlpsol('transcription', 'ipopt', nlp,
                                       ipopt_options(max_iter, tol))
-        # warm solver: capped iterations, then a cold solve takes over
-        self._solver_warm = ca.nlpsol('transcription_warm', 'ipopt', nlp,
-                                      ipopt_options(min(max_iter, 40), tol, warm=True))
+        # warm solver (capped iterations, then a cold solve takes over): built on the first
+        # request that can use it; each IPOPT instance holds ~25-40 MiB at N = 200
+        self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
+        self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
                                              ca.vec(tau_m), y])
         self._ba = ca.Function('ba', [x], [b, a])
@@ -282,6 +283,10 @@ class Transcription:
             use_warm = self.use_warm_start if warm is None else warm
             t0 = time.perf_counter()
             if use_warm and self._close_to_last(req):
+                if self._solver_warm is None:
+                    self._solver_warm = ca.nlpsol(
+                        'transcription_warm', 'ipopt', self._nlp,
+                        ipopt_options(min(self._max_iter, 40), self._tol, warm=True))
                 x0, lam_x, lam_g = self._last[:3]
                 x0 = np.clip(x0, lbx, ubx)
                 sol = self._solver_warm(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,

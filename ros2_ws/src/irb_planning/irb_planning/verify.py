@@ -182,14 +182,15 @@ def _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1):
             return b0 + 2 * a0 * s + (a1 - a0) * s * s / h
         left_rest = theta_dot[k] == 0 and lo == theta_nodes[k]
         right_rest = theta_dot[k + 1] == 0 and hi == theta_nodes[k + 1]
-        if left_rest:          # integrand ~ 1/sqrt(x - lo): alg weight, smooth remainder
-            val = quad(lambda x: np.sqrt((x - lo) / max(b(x), 1e-300)) if x > lo else
-                       1 / np.sqrt(2 * a0), lo, hi, weight='alg', wvar=(-0.5, 0.0),
-                       epsabs=0.0, epsrel=1e-10, limit=200)[0]
-        elif right_rest:
-            val = quad(lambda x: np.sqrt((hi - x) / max(b(x), 1e-300)) if x < hi else
-                       1 / np.sqrt(-2 * a1), lo, hi, weight='alg', wvar=(0.0, -0.5),
-                       epsabs=0.0, epsrel=1e-10, limit=200)[0]
+        kappa = (a1 - a0) / h
+        if left_rest:      # b = s (2 a0 + kappa s): quad's 1/sqrt weight takes the 1/sqrt(s)
+            val = quad(lambda x: 1 / np.sqrt(max(2 * a0 + kappa * (x - lo), 1e-300)), lo, hi,
+                       weight='alg', wvar=(-0.5, 0.0), epsabs=0.0, epsrel=1e-10,
+                       limit=200)[0]
+        elif right_rest:   # b = (h - s) (-2 a1 + kappa (h - s))
+            val = quad(lambda x: 1 / np.sqrt(max(-2 * a1 + kappa * (hi - x), 1e-300)), lo, hi,
+                       weight='alg', wvar=(0.0, -0.5), epsabs=0.0, epsrel=1e-10,
+                       limit=200)[0]
         else:
             val = quad(lambda x: 1 / np.sqrt(max(b(x), 1e-300)), lo, hi, epsabs=0.0,
                        epsrel=1e-10, limit=200)[0]
@@ -199,28 +200,30 @@ def _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1):
 
 def quintic(t0, t1, p0, p1, rate: float, min_samples: int):
     """Sample the quintic Hermite segments between points (positions, velocities,
-    accelerations p0/p1 = (q, qd, qdd), each (K, n)) over [t0, t1] (K,): (t, q, qd, qdd)."""
+    accelerations p0/p1 = (q, qd, qdd), each (K, n)) over [t0, t1] (K,): (t, q, qd, qdd),
+    each segment at max(min_samples, T rate) instants from its start (end excluded)."""
     q0, v0, a0 = p0
     q1, v1, a1 = p1
-    out = [[] for _ in range(4)]
-    for k in range(t0.size):
-        T = t1[k] - t0[k]
-        m = max(min_samples, int(np.ceil(T * rate)))
-        s = np.arange(m) / m * T
-        # q(s) = c0 + c1 s + ... + c5 s^5 matching q, qd, qdd at both ends
-        c0, c1, c2 = q0[k], v0[k], 0.5 * a0[k]
-        d = q1[k] - (c0 + c1 * T + c2 * T ** 2)
-        e = v1[k] - (c1 + 2 * c2 * T)
-        f = a1[k] - 2 * c2
-        c3 = (10 * d - 4 * e * T + 0.5 * f * T ** 2) / T ** 3
-        c4 = (-15 * d + 7 * e * T - f * T ** 2) / T ** 4
-        c5 = (6 * d - 3 * e * T + 0.5 * f * T ** 2) / T ** 5
-        S = s[:, None]
-        out[0].append(t0[k] + s)
-        out[1].append(c0 + c1 * S + c2 * S ** 2 + c3 * S ** 3 + c4 * S ** 4 + c5 * S ** 5)
-        out[2].append(c1 + 2 * c2 * S + 3 * c3 * S ** 2 + 4 * c4 * S ** 3 + 5 * c5 * S ** 4)
-        out[3].append(2 * c2 + 6 * c3 * S + 12 * c4 * S ** 2 + 20 * c5 * S ** 3)
-    return [np.concatenate(x) for x in out]
+    T = t1 - t0
+    m = np.maximum(min_samples, np.ceil(T * rate)).astype(int)
+    seg = np.repeat(np.arange(T.size), m)
+    first = np.cumsum(m) - m
+    s = (np.arange(seg.size) - first[seg]) / m[seg] * T[seg]
+    # q(s) = c0 + c1 s + ... + c5 s^5 matching q, qd, qdd at both ends
+    Tc = T[:, None]
+    c0, c1, c2 = q0, v0, 0.5 * a0
+    d = q1 - (c0 + c1 * Tc + c2 * Tc ** 2)
+    e = v1 - (c1 + 2 * c2 * Tc)
+    f = a1 - 2 * c2
+    c3 = (10 * d - 4 * e * Tc + 0.5 * f * Tc ** 2) / Tc ** 3
+    c4 = (-15 * d + 7 * e * Tc - f * Tc ** 2) / Tc ** 4
+    c5 = (6 * d - 3 * e * Tc + 0.5 * f * Tc ** 2) / Tc ** 5
+    c0, c1, c2, c3, c4, c5 = (c[seg] for c in (c0, c1, c2, c3, c4, c5))
+    S = s[:, None]
+    q = c0 + S * (c1 + S * (c2 + S * (c3 + S * (c4 + S * c5))))
+    qd = c1 + S * (2 * c2 + S * (3 * c3 + S * (4 * c4 + S * 5 * c5)))
+    qdd = 2 * c2 + S * (6 * c3 + S * (12 * c4 + S * 20 * c5))
+    return t0[seg] + s, q, qd, qdd
 
 
 def verify_plan(t, q, qd, qdd, profile, circle: Circle, kin: ArmKinematics,

@@ -46,9 +46,9 @@ def test_quadratic_profile_follows_linear_theta_ddot():
     theta = np.linspace(0, 2 * np.pi, 21)
     b = 1 + 2 * theta + theta ** 2 / 2
     pr = ThetaProfile(theta, np.sqrt(b), 1 + theta / 2)
-    fine = np.linspace(0, 2 * np.pi, 200001)
-    t_exact = np.trapezoid(1 / np.sqrt(1 + 2 * fine + fine ** 2 / 2), fine)
-    assert_allclose(pr.duration, t_exact, rtol=1e-4)
+    # b = ((theta + 2)^2 - 2) / 2: T = sqrt(2) (acosh((2 pi + 2) / sqrt 2) - acosh(sqrt 2))
+    t_exact = np.sqrt(2) * (np.arccosh((2 * np.pi + 2) / np.sqrt(2)) - np.arccosh(np.sqrt(2)))
+    assert_allclose(pr.duration, t_exact, rtol=1e-13)
     th, thd, thdd = pr.sample(np.linspace(0, pr.duration, 30))
     assert_allclose(thd, np.sqrt(1 + 2 * th + th ** 2 / 2), rtol=1e-12)
     assert_allclose(thdd, 1 + th / 2, rtol=1e-12)
@@ -119,3 +119,70 @@ def test_stribeck_envelope_is_a_concave_majorant(df, fv, vs):
     w = (u[1:-1] - u[:-2]) / (u[2:] - u[:-2])
     assert np.all(gh[1:-1] >= (1 - w) * gh[:-2] + w * gh[2:] - 1e-9)
     assert margin < 1e-6 * df
+
+
+def test_time_law_is_the_exact_integral_against_quad():
+    # the closed form of int ds / sqrt(b0 + 2 a0 s + kappa s^2) against scipy's adaptive
+    # quadrature (1/sqrt weight at rest ends), over random intervals of every kind
+    from scipy.integrate import quad
+
+    from irb_planning.profile import time_to
+    rng = np.random.default_rng(5)
+    checked = 0
+    for i in range(600):
+        h = rng.uniform(1e-3, 0.5)
+        kind = i % 3
+        if kind == 0:            # leaving rest
+            b0, a0, a1 = 0.0, rng.uniform(1e-3, 5), rng.uniform(-5, 5)
+        elif kind == 1:          # reaching rest: b(h) = 0
+            a0, a1 = rng.uniform(-5, 5), -rng.uniform(1e-2, 5)
+            b0 = -(a0 + a1) * h
+            if b0 <= 0:
+                continue
+        else:
+            b0 = rng.uniform(1e-3, 10)
+            a0, a1 = rng.normal() * 10 ** rng.uniform(-6, 1), rng.normal() * 10 ** rng.uniform(-6, 1)
+        kappa = (a1 - a0) / h
+
+        def b(x):
+            return b0 + 2 * a0 * x + kappa * x * x
+        if np.min(b(np.linspace(0, h, 1001))[1:-1]) <= 1e-6:
+            continue
+        b_end = 0.0 if kind == 1 else None
+        got = float(time_to(b0, a0, kappa, h, b_end))
+        if kind == 0:
+            # b = x (2 a0 + kappa x): the weight takes the 1/sqrt(x)
+            ref = quad(lambda x: 1 / np.sqrt(2 * a0 + kappa * x), 0, h,
+                       weight='alg', wvar=(-0.5, 0),
+                       epsabs=0, epsrel=1e-12)[0]
+        elif kind == 1:
+            # b = (h - x) (-2 a1 + kappa (h - x))
+            ref = quad(lambda x: 1 / np.sqrt(-2 * a1 + kappa * (h - x)), 0, h, weight='alg',
+                       wvar=(0, -0.5), epsabs=0, epsrel=1e-12)[0]
+        else:
+            ref = quad(lambda x: 1 / np.sqrt(b(x)), 0, h, epsabs=0, epsrel=1e-12)[0]
+        assert got == pytest.approx(ref, rel=1e-9), (kind, b0, a0, a1, h)
+        checked += 1
+    assert checked > 300
+
+
+def test_sample_and_theta_at_invert_each_other():
+    theta = np.linspace(0, 2 * np.pi, 21)
+    b = 1 + 2 * theta + theta ** 2 / 2
+    pr = ThetaProfile(theta, np.sqrt(b), 1 + theta / 2)
+    th = np.linspace(0, 2 * np.pi, 77)
+    t, thd, thdd = pr.theta_at(th)
+    th2, thd2, thdd2 = pr.sample(t)
+    assert_allclose(th2, th, atol=1e-12)
+    assert_allclose(thd2, thd, rtol=1e-12)
+    # b = ((theta + 2)^2 - 2) / 2: t(theta) = sqrt(2) (acosh((theta + 2)/sqrt 2) - acosh(sqrt 2))
+    exact = np.sqrt(2) * (np.arccosh((th + 2) / np.sqrt(2)) - np.arccosh(np.sqrt(2)))
+    assert_allclose(t, exact, rtol=1e-12, atol=1e-15)
+
+
+def test_quadratic_profile_that_dips_below_zero_is_refused():
+    # the shape of the 30 s defect: leaving rest with theta_ddot < 0, so b < 0 just after it
+    td = np.array([0.0, np.sqrt(0.5), 0.0])
+    a = np.array([-0.55, 1.05, -1.55])          # consistent: b1 - b0 = (a0 + a1) * 1 etc.
+    with pytest.raises(ValueError, match='negative'):
+        ThetaProfile(np.array([0.0, 1.0, 2.0]), td, a)
