@@ -15,12 +15,14 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, state_qos
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from irb_interfaces.msg import AxisStatus
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import apply_realtime, declare_realtime, make_executor
@@ -70,6 +72,8 @@ class SimulatorNode(Node):
             'plant_effects_file': declare(self, 'plant_effects_file', '',
                                           "YAML with an 'effects:' section; '' = the plant "
                                           'friction file (no section: no effects)'),
+            'status_period_s': declare(self, 'status_period_s', 0.1,
+                                       'axis_status at least this often (and on change) [s]'),
             'lockstep_wait_s': declare(self, 'lockstep_wait_s', 0.05,
                                        'lockstep: wall time to wait for a command [s]'),
             'stats_path': declare(self, 'stats_path', '',
@@ -103,6 +107,11 @@ class SimulatorNode(Node):
                           if self.lockstep else None)
         self.create_subscription(JointState, 'torque_command', self.on_command_raw,
                                  state_qos(), raw=True)
+        # the drives' status, as the axis computer reports it; errors latch until ~/reset
+        self.pub_status = self.create_publisher(AxisStatus, 'axis_status', latched_qos())
+        self.create_service(Trigger, '~/reset', self.on_reset)
+        self._status_key = None
+        self._status_due = 0.0
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
         self._state_enc = JointStateEncoder(self.joint_names, 3, 3, 3)
         self._decoder = JointStateDecoder()
@@ -164,6 +173,28 @@ class SimulatorNode(Node):
             self._effort_idx = [idx[n] for n in self.joint_names]
         return tau
 
+    def on_reset(self, request, response):
+        """Clear a latched error (as the axis computer's reset): commands are taken again."""
+        was = self.plant.clear_error()
+        response.success = True
+        response.message = f'error cleared: {was}' if was else 'no error latched'
+        self.get_logger().info(f'reset: {response.message}')
+        self._status(force=True)
+        return response
+
+    def _status(self, force: bool = False) -> None:
+        """axis_status on every change of brakes/error and every status_period_s."""
+        p = self.plant
+        key = (p.braked, p.error)
+        now = time.monotonic()
+        if not force and key == self._status_key and now < self._status_due:
+            return
+        self._status_key, self._status_due = key, now + self.p['status_period_s']
+        m = AxisStatus(motors_on=not p.braked, brakes_engaged=p.braked,
+                       error=1 if p.error else 0, error_text=p.error, source='simulator')
+        m.header.stamp = self.get_clock().now().to_msg()
+        self.pub_status.publish(m)
+
     # --- loop ----------------------------------------------------------------------------
     def _publish_state(self, stamp: Time) -> None:
         y = self.plant.measure()
@@ -174,6 +205,7 @@ class SimulatorNode(Node):
         self.pub_state.publish(data)
 
     def _after_step(self, stamp_of) -> None:
+        self._status()
         for t, text in self.plant.events:
             self.get_logger().warn(f'[t = {t:.3f} s] {text}')
         self.plant.events.clear()
