@@ -141,7 +141,8 @@ class PlanGate:
         self._stopping = False
         self.proc = subprocess.Popen(
             [sys.executable, '-m', 'irb_control.plan_gate', json.dumps(asdict(cfg))],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=False)
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            start_new_session=True)    # a terminal's Ctrl-C is for pdplus, not for the gate
         self._reader = threading.Thread(target=self._read, name='plan_gate_reader',
                                         daemon=True)
         self._reader.start()

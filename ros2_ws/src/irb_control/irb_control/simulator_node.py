@@ -267,6 +267,17 @@ class SimulatorNode(Node):
             if time.monotonic() - next_tick > 10 * T:       # fell far behind: resynchronise
                 next_tick = time.monotonic() + T
 
+    def destroy_node(self):
+        """Write the statistics (after run_node has stopped listening to further Ctrl-C, so a
+        second one cannot cut this short), then destroy."""
+        if self.p['stats_path']:
+            try:
+                Path(self.p['stats_path']).write_text(json.dumps(self.stats(), indent=2))
+            except OSError as exc:
+                self.get_logger().error(f"statistics not written to {self.p['stats_path']}: "
+                                        f'{exc.strerror}')
+        return super().destroy_node()
+
     def stats(self) -> dict:
         lat = np.array(self.latencies) * 1e3
         q = (lambda p: float(np.percentile(lat, p))) if lat.size else (lambda p: math.nan)
@@ -299,8 +310,6 @@ def _spin(node: SimulatorNode) -> None:
     try:
         node.run(executor)
     finally:
-        if node.p['stats_path']:
-            Path(node.p['stats_path']).write_text(json.dumps(node.stats(), indent=2))
         executor.shutdown()
 
 

@@ -23,10 +23,10 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def _stop(proc):
-    """SIGINT to `ros2 run` (it forwards it to the node), SIGKILL to the whole session (both)
-    after 20 s."""
+    """Ctrl-C as a terminal sends it (SIGINT to the session's group: `ros2 run` and the node,
+    once each), SIGKILL to the group after 20 s."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:

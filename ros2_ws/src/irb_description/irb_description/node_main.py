@@ -17,23 +17,58 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 def run_node(make_node, spin, args=None) -> None:
     """The Jazzy main idiom, robust to Ctrl-C at any moment, also while the node is built.
 
-    ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor).
+    ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor). The
+    first SIGINT or SIGTERM stops the node (KeyboardInterrupt out of ``spin``) and blocks both
+    signals from then on: a second Ctrl-C during the clean-up (closing files, writing
+    statistics) changes nothing, and the exit code is 0.
     """
+    for s in (signal.SIGINT, signal.SIGTERM):      # chained after rclpy's own handler
+        signal.signal(s, _first_signal)
     rclpy.init(args=args)
     node = None
     try:
-        node = make_node()
-        # everything built so far lives as long as the node: out of the collector's way, so
-        # that a full collection in the 248 Hz loop does not walk it (a few ms otherwise)
-        gc.collect()
-        gc.freeze()
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
+        try:
+            # Ctrl-C while the node is built is held back until it exists (a
+            # KeyboardInterrupt between its construction and the assignment would skip its
+            # clean-up)
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, _SIGNALS)
+            try:
+                node = make_node()
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+            # everything built so far lives as long as the node: out of the collector's way,
+            # so that a full collection in the 248 Hz loop does not walk it (a few ms
+            # otherwise)
+            gc.collect()
+            gc.freeze()
+            spin(node)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            _ignore_signals()
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+            _ignore_signals()       # rclpy's shutdown restores the handlers it replaced
+    except KeyboardInterrupt:       # raised just before the signals were ignored: cleaned up
         pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+
+
+_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _ignore_signals() -> None:
+    """SIGINT and SIGTERM ignored by the whole process (every thread) from now on; Python's
+    finalisation keeps SIG_IGN, so a late Ctrl-C cannot kill the exiting process either."""
+    for s in _SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+
+
+def _first_signal(signum, frame):
+    """The first SIGINT/SIGTERM (main thread): later ones are ignored, then
+    KeyboardInterrupt as Python's default handler does."""
+    _ignore_signals()
+    raise KeyboardInterrupt
 
 
 def declare(node: Node, name: str, default, description: str):
