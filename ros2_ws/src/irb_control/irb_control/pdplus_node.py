@@ -21,7 +21,7 @@ import numpy as np
 from irb_description.model import RobotModel
 from irb_description.node_main import declare, latched_qos, run_node, state_qos
 from irb_description.path import CirclePath
-from irb_interfaces.msg import AxisStatus, ControllerState
+from irb_interfaces.msg import AxisStatus, ControllerState, PlanStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -133,6 +133,9 @@ class PdPlusNode(Node):
                                  raw=True)
         self.create_subscription(AxisStatus, 'axis_status', self.on_axis_status,
                                  latched_qos())
+        self.pub_plan_status = self.create_publisher(PlanStatus, '~/plan_status',
+                                                     latched_qos())
+        self.plans_accepted = self.plans_refused = 0
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
         self._names = list(self.model.joint_names)
@@ -318,27 +321,35 @@ class PdPlusNode(Node):
 
     def on_plan_result(self, result: dict) -> None:
         """A plan the gate process checked (reader thread): offered to the controller, where it
-        waits for enable; or the reason it was refused."""
-        self.last_plan = result
-        if not result.get('ok'):
-            self.get_logger().error(f"planned_trajectory refused: {result.get('reason')}")
-            return
-        try:
-            prof = profile_from_result(result)
-            if self.time_driven != isinstance(prof, TimeTrajectory):
-                raise ProfileError(f"{'time' if self.time_driven else 'theta'}-driven mode "
-                                   f"cannot use a {result['kind']} profile")
-            with self._lock:
-                why = (self.ctrl.set_time_trajectory(prof) if self.time_driven
-                       else self.ctrl.set_path_profile(prof))
-        except ProfileError as exc:
-            self.last_plan = {'ok': False, 'reason': str(exc)}
-            self.get_logger().error(f'planned_trajectory refused: {exc}')
-            return
+        waits for enable; or the reason it was refused. Either way ~/plan_status says so."""
+        if result.get('ok'):
+            try:
+                prof = profile_from_result(result)
+                if self.time_driven != isinstance(prof, TimeTrajectory):
+                    raise ProfileError(f"{'time' if self.time_driven else 'theta'}-driven mode "
+                                       f"cannot use a {result['kind']} profile")
+                with self._lock:
+                    why = (self.ctrl.set_time_trajectory(prof) if self.time_driven
+                           else self.ctrl.set_path_profile(prof))
+            except ProfileError as exc:
+                result = dict(result, ok=False, reason=str(exc))
         sm = result.get('summary', {})
-        self.get_logger().info(
-            f"planned_trajectory accepted ({sm.get('points', '?')} points, "
-            f"{sm.get('duration_s', float('nan')):.3f} s): {why}; it starts on ~/enable")
+        status = PlanStatus(accepted=bool(result.get('ok')), reason=result.get('reason', ''),
+                            points=int(sm.get('points', result.get('points', 0))),
+                            duration=float(sm.get('duration_s', 0.0)))
+        sec, nanosec = result.get('stamp', (0, 0))
+        status.plan_stamp.sec, status.plan_stamp.nanosec = int(sec), int(nanosec)
+        if status.accepted:
+            self.plans_accepted += 1
+            self.get_logger().info(f'planned_trajectory accepted ({status.points} points, '
+                                   f'{status.duration:.3f} s): {why}; it starts on ~/enable')
+        else:
+            self.plans_refused += 1
+            self.get_logger().error(f'planned_trajectory refused: {status.reason}')
+        status.accepted_count, status.refused_count = self.plans_accepted, self.plans_refused
+        status.header.stamp = self.get_clock().now().to_msg()
+        self.last_plan = result
+        self.pub_plan_status.publish(status)
 
     def on_gate_exit(self, text: str) -> None:
         self.get_logger().error(text)

@@ -245,6 +245,7 @@ def main(argv=None) -> int:
             result['ok'] = True
         except (PlanRejected, ProfileError, ValueError) as exc:
             result = {'ok': False, 'reason': str(exc), 'points': len(msg.points)}
+        result['stamp'] = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         _write(result)
     node.create_subscription(JointTrajectory, cfg.topic, on_plan, latched_qos())
     try:
