@@ -22,8 +22,7 @@ def run_node(make_node, spin, args=None) -> None:
     signals from then on: a second Ctrl-C during the clean-up (closing files, writing
     statistics) changes nothing, and the exit code is 0.
     """
-    for s in (signal.SIGINT, signal.SIGTERM):      # chained after rclpy's own handler
-        signal.signal(s, _first_signal)
+    install_stop_signals()
     rclpy.init(args=args)
     node = None
     try:
@@ -45,11 +44,11 @@ def run_node(make_node, spin, args=None) -> None:
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
-            _ignore_signals()
+            ignore_stop_signals()
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
-            _ignore_signals()       # rclpy's shutdown restores the handlers it replaced
+            ignore_stop_signals()   # rclpy's shutdown restores the handlers it replaced
     except KeyboardInterrupt:       # raised just before the signals were ignored: cleaned up
         pass
 
@@ -57,17 +56,23 @@ def run_node(make_node, spin, args=None) -> None:
 _SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
-def _ignore_signals() -> None:
+def ignore_stop_signals() -> None:
     """SIGINT and SIGTERM ignored by the whole process (every thread) from now on; Python's
     finalisation keeps SIG_IGN, so a late Ctrl-C cannot kill the exiting process either."""
     for s in _SIGNALS:
         signal.signal(s, signal.SIG_IGN)
 
 
+def install_stop_signals() -> None:
+    """Call before rclpy.init (main thread): the first SIGINT/SIGTERM raises
+    KeyboardInterrupt once (after rclpy's own handler, which it chains to), later ones are
+    ignored, so a second Ctrl-C cannot interrupt the clean-up."""
+    for s in _SIGNALS:
+        signal.signal(s, _first_signal)
+
+
 def _first_signal(signum, frame):
-    """The first SIGINT/SIGTERM (main thread): later ones are ignored, then
-    KeyboardInterrupt as Python's default handler does."""
-    _ignore_signals()
+    ignore_stop_signals()
     raise KeyboardInterrupt
 
 
@@ -91,8 +96,8 @@ def latched_qos() -> QoSProfile:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def spin_until_signal(executor, timeout_sec: float = 0.1) -> None:
-    """spin_once loop that ends on SIGINT/SIGTERM *between* callbacks.
+def spin_until_signal(executor, timeout_sec: float = 0.1, until=None) -> None:
+    """spin_once loop that ends on SIGINT/SIGTERM *between* callbacks (or when ``until()``).
 
     A KeyboardInterrupt raised inside a callback is caught and logged by the executor as a
     failure; here the signal only sets a flag, so the node shuts down cleanly. Also the way
@@ -102,7 +107,7 @@ def spin_until_signal(executor, timeout_sec: float = 0.1) -> None:
     previous = {s: signal.signal(s, lambda *_: stop.set())
                 for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while rclpy.ok() and not stop.is_set():
+        while rclpy.ok() and not stop.is_set() and not (until is not None and until()):
             executor.spin_once(timeout_sec=timeout_sec)
     finally:
         for s, handler in previous.items():
