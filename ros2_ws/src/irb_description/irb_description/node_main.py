@@ -27,14 +27,9 @@ def run_node(make_node, spin, args=None) -> None:
     node = None
     try:
         try:
-            # Ctrl-C while the node is built is held back until it exists (a
-            # KeyboardInterrupt between its construction and the assignment would skip its
-            # clean-up)
-            held = signal.pthread_sigmask(signal.SIG_BLOCK, _SIGNALS)
-            try:
-                node = make_node()
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+            node, interrupted = build_node(make_node)
+            if interrupted:
+                raise KeyboardInterrupt
             # everything built so far lives as long as the node: out of the collector's way,
             # so that a full collection in the 248 Hz loop does not walk it (a few ms
             # otherwise)
@@ -56,6 +51,27 @@ def run_node(make_node, spin, args=None) -> None:
 _SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
+_state = {'deferring': False, 'pending': False}
+
+
+def build_node(make_node):
+    """(node, interrupted): ``make_node()`` with a Ctrl-C (handled by ``install_stop_signals``)
+    deferred until the node exists, so that a KeyboardInterrupt can never fall between its
+    construction and the caller holding it (whose clean-up would then be skipped).
+    ``interrupted``: a Ctrl-C came meanwhile (rclpy's own handler may also have shut the
+    context down: a construction that failed because of that is an interruption too)."""
+    _state['deferring'] = True
+    try:
+        node = make_node()
+    except BaseException:
+        if _state['pending'] or not rclpy.ok():
+            raise KeyboardInterrupt from None
+        raise
+    finally:
+        _state['deferring'] = False
+    return node, _state['pending'] or not node.context.ok()
+
+
 def ignore_stop_signals() -> None:
     """SIGINT and SIGTERM ignored by the whole process (every thread) from now on; Python's
     finalisation keeps SIG_IGN, so a late Ctrl-C cannot kill the exiting process either."""
@@ -73,6 +89,9 @@ def install_stop_signals() -> None:
 
 def _first_signal(signum, frame):
     ignore_stop_signals()
+    if _state['deferring']:             # inside build_node: raised there, once the node exists
+        _state['pending'] = True
+        return
     raise KeyboardInterrupt
 
 

@@ -10,7 +10,8 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
-from irb_description.node_main import ignore_stop_signals, spin_until_signal
+from irb_description.node_main import (build_node, ignore_stop_signals, install_stop_signals,
+                                       spin_until_signal)
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -165,25 +166,37 @@ class RecorderNode(Node):
 def main(args=None):
     """Exit 0 after Ctrl-C (bag closed); 1 with one line when the bag cannot be created or
     writing fails (a full disk: the closed splits are kept)."""
+    install_stop_signals()
     rclpy.init(args=args)
     try:
-        node = RecorderNode()
+        node, interrupted = build_node(RecorderNode)
     except (BagError, OSError) as exc:
         text = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         print(f'recorder: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
+    except (KeyboardInterrupt, ExternalShutdownException):   # before the bag existed
+        ignore_stop_signals()
+        rclpy.try_shutdown()
+        return 0
+    executor = None
     try:
+        if interrupted:
+            raise KeyboardInterrupt
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
         # the signal ends the loop between callbacks: a KeyboardInterrupt inside a write
         # callback would leave a half-written record in the file that close() then finishes
         spin_until_signal(executor, until=lambda: bool(node.failed))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - rclpy errors after Ctrl-C shut the context down
+        if node.context.ok():
+            raise
     finally:
         ignore_stop_signals()        # a second Ctrl-C must not cut the closing of the bag
-        executor.shutdown()
+        if executor is not None:
+            executor.shutdown()
         node.close()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -9,7 +9,7 @@ import threading
 import time
 
 import rclpy
-from irb_description.node_main import ignore_stop_signals, install_stop_signals
+from irb_description.node_main import build_node, ignore_stop_signals, install_stop_signals
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -107,7 +107,7 @@ def main(args=None):
     install_stop_signals()
     rclpy.init(args=args)
     try:
-        node = ReplayNode()
+        node, interrupted = build_node(ReplayNode)
     except BagError as exc:
         print(f'replay: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
@@ -117,16 +117,18 @@ def main(args=None):
         rclpy.try_shutdown()
         return 0
     player = threading.Thread(target=node.run, daemon=True)
-    player.start()
+    if not interrupted:
+        player.start()
     try:
-        while rclpy.ok() and not node.done.is_set():
+        while not interrupted and rclpy.ok() and not node.done.is_set():
             rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         ignore_stop_signals()
         node.stop.set()
-        player.join(timeout=5.0)
+        if player.is_alive():
+            player.join(timeout=5.0)
         error = node.error
         node.destroy_node()
         rclpy.try_shutdown()
