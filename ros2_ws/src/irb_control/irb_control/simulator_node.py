@@ -122,6 +122,7 @@ class SimulatorNode(Node):
         self._answered_k = -1
         self._k = 0
         self.latencies: list[float] = []
+        self.stale_commands = 0               # commands that did not answer the latest state
         self.missed = 0
         self.missed_run = 0
         self.max_missed_run = 0
@@ -154,11 +155,16 @@ class SimulatorNode(Node):
             self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
                                    throttle_duration_sec=1.0)
             return
-        self.plant.command(tau)
         t_sent = self._sent.pop(sec * 1_000_000_000 + nanosec, None)
-        if t_sent is not None:
-            self.latencies.append(now - t_sent)
-            self._answered_k = self._k
+        if t_sent is None:
+            # not the answer to the latest state (as the axis computer, which applies only
+            # the command carrying the current cycle's sequence number): a late or stale
+            # command never acts on the robot
+            self.stale_commands += 1
+            return
+        self.plant.command(tau)
+        self.latencies.append(now - t_sent)
+        self._answered_k = self._k
 
     def _effort(self, names: tuple, effort) -> np.ndarray | None:
         """``_effort_by_name`` with the index lookup cached for repeated joint names."""
@@ -285,6 +291,7 @@ class SimulatorNode(Node):
                 'latency_ms': {'p50': q(50), 'p99': q(99), 'max': float(lat.max())
                                if lat.size else math.nan},
                 'missed_deadlines': self.missed, 'max_consecutive_missed': self.max_missed_run,
+                'stale_commands_ignored': self.stale_commands,
                 'sim_time_s': self.plant.state.t,
                 'wall_time_s': time.monotonic() - self.t_wall0,
                 'energy_j': self.plant.state.energy}
