@@ -123,6 +123,7 @@ class SimulatorNode(Node):
         self._k = 0
         self.latencies: list[float] = []
         self.stale_commands = 0               # commands that did not answer the latest state
+        self.tick_late: list[float] = []      # [s] how late each state went out (real time)
         self.missed = 0
         self.missed_run = 0
         self.max_missed_run = 0
@@ -269,6 +270,7 @@ class SimulatorNode(Node):
             self._after_step(lambda t: _stamp(t0_ros + t))
             stamp = self.get_clock().now().to_msg()
             self._publish_state(stamp)
+            self.tick_late.append(time.monotonic() - next_tick)
             next_tick += T
             if time.monotonic() - next_tick > 10 * T:       # fell far behind: resynchronise
                 next_tick = time.monotonic() + T
@@ -292,9 +294,18 @@ class SimulatorNode(Node):
                                if lat.size else math.nan},
                 'missed_deadlines': self.missed, 'max_consecutive_missed': self.max_missed_run,
                 'stale_commands_ignored': self.stale_commands,
+                'state_publish_late_ms': _percentiles(np.array(self.tick_late) * 1e3),
                 'sim_time_s': self.plant.state.t,
                 'wall_time_s': time.monotonic() - self.t_wall0,
                 'energy_j': self.plant.state.energy}
+
+
+def _percentiles(x: np.ndarray) -> dict | None:
+    """p50/p99/max and the count of values above one period (4.032 ms) of ``x`` [ms]."""
+    if not x.size:
+        return None
+    return {'p50': float(np.percentile(x, 50)), 'p99': float(np.percentile(x, 99)),
+            'max': float(x.max()), 'over_one_period': int(np.sum(x > 4.032))}
 
 
 def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:
