@@ -19,6 +19,11 @@ ECHO_ARGS = ('import json, os, sys\nprint(json.dumps(sys.argv[1:]), flush=True)\
 # Reports readiness, then exits 42 on SIGTERM (proves the shim forwards the signal).
 WAIT_TERM = ('import signal, sys\nsignal.signal(signal.SIGTERM, lambda *a: sys.exit(42))\n'
              'print("ready", flush=True)\nwhile True:\n    signal.pause()\n')
+# Counts SIGINTs; after the first, lets a second one arrive (it must not), then exits with
+# 10 + the count. Its stdin is the test's pipe: the test closes it to say "no more signals".
+COUNT_INT = ('import signal, sys\nn = [0]\n'
+             'signal.signal(signal.SIGINT, lambda *a: n.__setitem__(0, n[0] + 1))\n'
+             'print("ready", flush=True)\nsys.stdin.read()\nsys.exit(10 + n[0])\n')
 # Reports readiness, then waits; the default SIGTERM disposition kills it.
 WAIT = 'import signal\nprint("ready", flush=True)\nwhile True:\n    signal.pause()\n'
 
@@ -58,6 +63,7 @@ def prefix(tmp_path, monkeypatch):
             'self_term': sh('kill -TERM $$'),
             'wait_term': py(WAIT_TERM),
             'wait': py(WAIT),
+            'count_int': py(COUNT_INT),
             'not_exec.py': ('print("never")\n', 0o644),
             '.hidden/ghost': sh('exit 0'),
         },
@@ -136,6 +142,24 @@ def test_run_forwarded_sigterm_kills_default_child(prefix):
     assert _start_and_terminate('wait') == 256 - signal.SIGTERM
 
 
+def test_ctrl_c_reaches_the_child_once_and_the_shim_waits(prefix):
+    # issue 14 defect 11: the shim forwarded SIGINT, so a terminal's Ctrl-C (SIGINT to the
+    # whole foreground group) reached the node twice; ros2run does not forward it
+    env = dict(os.environ, PYTHONPATH=SRC)
+    proc = subprocess.Popen([sys.executable, '-m', 'ros2shim.cli', 'run', 'demo', 'count_int'],
+                            env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == 'ready'
+        os.killpg(proc.pid, signal.SIGINT)         # what the terminal does
+        assert proc.poll() is None                 # the shim keeps waiting for its child
+        proc.stdin.close()
+        assert proc.wait(timeout=30) == 11         # exactly one SIGINT reached the child
+    finally:
+        proc.kill()
+        proc.stdout.close()
+
+
 def test_run_prefix_option(prefix, capfd):
     assert run_main(['run', '--prefix', 'echo PRE "x y"', 'demo', 'exit3', '-a']) == 0
     out = capfd.readouterr().out.split()
@@ -196,10 +220,10 @@ def test_run_usage_errors(prefix, capfd, argv):
 def test_pkg_executables_all(prefix, capfd):
     assert run_main(['pkg', 'executables']) == 0
     assert capfd.readouterr().out.splitlines() == [
-        'demo echo_args', 'demo exit3', 'demo self_term', 'demo wait', 'demo wait_term',
-        'other dup', 'other dup', 'other tool']
+        'demo count_int', 'demo echo_args', 'demo exit3', 'demo self_term', 'demo wait',
+        'demo wait_term', 'other dup', 'other dup', 'other tool']
     result = run_cli('pkg', 'executables')
-    assert result.returncode == 0 and result.stdout.count('\n') == 8
+    assert result.returncode == 0 and result.stdout.count('\n') == 9
 
 
 def test_pkg_executables_one_and_full_path(prefix, capfd):

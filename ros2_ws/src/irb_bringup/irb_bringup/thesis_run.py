@@ -73,8 +73,8 @@ class Link:
 
     def __init__(self):
         import rclpy
-        from irb_description.node_main import state_qos
-        from irb_interfaces.msg import ControllerState
+        from irb_description.node_main import latched_qos, state_qos
+        from irb_interfaces.msg import ControllerState, PlanStatus
         from irb_interfaces.srv import PlanPath
         from rclpy.executors import SingleThreadedExecutor
         from std_srvs.srv import Trigger
@@ -89,6 +89,9 @@ class Link:
         self.stop_reason = ''
         self.node.create_subscription(ControllerState, 'controller_state', self._on_state,
                                       state_qos())
+        self.plan_status = None
+        self.node.create_subscription(PlanStatus, 'pdplus/plan_status',
+                                      lambda m: setattr(self, 'plan_status', m), latched_qos())
         self.client = self.node.create_client(PlanPath, 'plan_path')
         self.Trigger = Trigger
         self.enable_client = self.node.create_client(Trigger, 'pdplus/enable')
@@ -232,11 +235,17 @@ def main(args=None) -> int:
                                             for t in ('/joint_states', '/controller_state',
                                                       '/camera/tcp')), 60):
                 raise RuntimeError(f'recorder for {label} did not subscribe')
-            n_profiles = lines.count('pdplus', 'new profile from planned_trajectory')
+            def accepted():
+                st = link.plan_status
+                return st.accepted_count + st.refused_count if st is not None else 0
+            n_plans = accepted()
             plans[label] = link.plan(cfg, objective, friction, g)
-            if not g.wait_until(lambda: lines.count('pdplus', 'new profile from planned_'
-                                                    'trajectory') > n_profiles, 60):
-                raise RuntimeError(f'pdplus did not take the {label} plan')
+            # pdplus checks every plan (its plan gate) and says so on ~/plan_status
+            if not link.spin_until(lambda: accepted() > n_plans, 60, g):
+                raise RuntimeError(f'pdplus gave no verdict on the {label} plan')
+            if not link.plan_status.accepted:
+                raise RuntimeError(f'pdplus refused the {label} plan: '
+                                   f'{link.plan_status.reason}')
             link.enable(g)
             ok = link.spin_until(lambda: 2 in link.modes and link.modes[-1] in (4, 5),
                                  cfg['phase_timeout_s'], g)

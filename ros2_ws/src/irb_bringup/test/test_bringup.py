@@ -75,7 +75,7 @@ def test_graph_comes_up_and_stops_cleanly_on_ctrl_c(tmp_path):
     out = Output(proc)
     try:
         assert out.wait('[pdplus]', 60) and out.wait('[simulator]', 60), out.text
-        os.kill(proc.pid, signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
         assert proc.wait(timeout=60) == 0, out.text
     finally:
         if proc.poll() is None:

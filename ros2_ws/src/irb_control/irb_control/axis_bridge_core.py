@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .axis_protocol import (CYCLE_S, MODE_TORQUE, CommandPacket, ProtocolError, StatePacket,
-                            decode_state, encode_command, seq_newer)
+from .axis_protocol import (CYCLE_S, MODE_TORQUE, CommandPacket, ProtocolError,
+                            SequenceTracker, StatePacket, decode_state, encode_command)
 
 
 @dataclass
@@ -24,6 +24,7 @@ class BridgeStats:
     late_commands: int = 0      # controller commands that arrived too late and were dropped
     unanswered: int = 0         # accepted states that got no command before the next one
     link_losses: int = 0
+    resyncs: int = 0            # sessions or sequence jumps adopted after confirmation
     rejected: Counter = field(default_factory=Counter)   # size/magic/version/crc/nan/dup/stale
 
 
@@ -32,13 +33,17 @@ class BridgeCore:
 
     A command is sent only for the newest accepted state, and only while that state is younger
     than ``max_command_age_s`` (one cycle by default): the bridge never sends a command older
-    than one cycle. States with a sequence number not newer than the last accepted one are
-    rejected as 'duplicate' (equal) or 'stale' (older).
+    than one cycle. Which states are accepted is ``axis_protocol.SequenceTracker``'s rule
+    (session id, bounded window, resynchronisation after ``resync_confirm`` consecutive states
+    of a restarted axis computer); rejections are counted by reason. Commands echo the
+    session of the state they answer.
     """
 
-    def __init__(self, link_timeout_s: float = 0.1, max_command_age_s: float = CYCLE_S):
+    def __init__(self, link_timeout_s: float = 0.1, max_command_age_s: float = CYCLE_S,
+                 seq_window: int = 250, resync_confirm: int = 3):
         self.link_timeout_s = link_timeout_s
         self.max_command_age_s = max_command_age_s
+        self.seq = SequenceTracker(seq_window, resync_confirm)
         self.stats = BridgeStats()
         self.last_state: StatePacket | None = None
         self._last_state_time: float | None = None
@@ -54,23 +59,27 @@ class BridgeCore:
     def on_datagram(self, data: bytes, now: float) -> tuple[StatePacket | None, str | None]:
         """Validate a datagram. Returns (state to publish or None, link event or None).
 
-        The event is 'up' for the first valid state and 'recovered' after a loss.
+        The event is 'up' for the first valid state, 'recovered' after a loss and 'resync'
+        when the axis computer restarted (new session) or its sequence jumped.
         """
         try:
             state = decode_state(data)
         except ProtocolError as exc:
             self.stats.rejected[exc.reason] += 1
             return None, None
-        if self.last_state is not None and not seq_newer(state.seq, self.last_state.seq):
-            reason = 'duplicate' if state.seq == self.last_state.seq else 'stale'
-            self.stats.rejected[reason] += 1
+        verdict = self.seq.offer(state.session, state.seq)
+        if verdict not in ('accept', 'resync'):
+            self.stats.rejected[verdict] += 1
             return None, None
+        resync = verdict == 'resync' and self.last_state is not None
         if not self._answered:
             self.stats.unanswered += 1
-        event = None
+        event = 'resync' if resync else None
         if not self.link_up:
             event = 'up' if self.stats.link_losses == 0 else 'recovered'
             self.link_up = True
+        if resync:
+            self.stats.resyncs += 1
         self.last_state, self._last_state_time, self._answered = state, now, False
         if state.error == 0:
             self._reset_pending = False
@@ -93,7 +102,7 @@ class BridgeCore:
         self._answered = True
         self.stats.commands_sent += 1
         return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE,
-                                            self._reset_pending))
+                                            self._reset_pending, self.last_state.session))
 
     def check_link(self, now: float) -> str | None:
         """'lost' once when no valid state arrived for ``link_timeout_s``, else None."""

@@ -1,8 +1,11 @@
 """`ros2 run irb_control axis_bridge`: the axis computer's UDP torque protocol <-> ROS.
 
-Receives STATE packets, publishes /joint_states exactly as the simulator does, and answers
-each state with the controller's /torque_command carrying the state's sequence number
-(logic in axis_bridge_core.BridgeCore, protocol in doc/axis_protocol.md).
+Receives STATE packets (only from the configured axis computer address and port; others are
+dropped and counted), publishes /joint_states exactly as the simulator does (stamped with this
+host's ROS clock at reception, so that pdplus can judge its age) and the drives' status on
+/axis_status, and answers each state with the controller's /torque_command carrying the
+state's sequence number and session (logic in axis_bridge_core.BridgeCore, protocol in
+doc/axis_protocol.md).
 """
 from __future__ import annotations
 
@@ -14,13 +17,14 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, state_qos
+from irb_interfaces.msg import AxisStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
-from .axis_protocol import MODE_NAMES
+from .axis_protocol import MODE_NAMES, MODE_TORQUE, error_text
 from .node_util import declare_realtime, spin_with
 
 
@@ -41,11 +45,16 @@ class AxisBridge(Node):
         max_age = declare(self, 'max_command_age_s', 0.004032,
                           'never send a command for a state older than this [s]')
         status_period = declare(self, 'status_period_s', 0.5,
-                                'period of /axis_bridge/status [s]')
+                                'period of /axis_bridge/status and /axis_status [s]')
+        window = declare(self, 'seq_window', 250, 'states more than this many cycles ahead '
+                         'are a jump, adopted only after resync_confirm in a row [-]')
+        confirm = declare(self, 'resync_confirm', 3, 'consecutive states of a new session (or '
+                          'after a jump) before the bridge follows it [-]')
         self.executor_kind = declare(self, 'executor', 'events',
                                      "'events' (rclpy EventsExecutor, faster) or 'single'")
         self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
-        self.core = BridgeCore(link_timeout, max_age)
+        self.core = BridgeCore(link_timeout, max_age, window, confirm)
+        self.peer = (self.axis_address, self.command_port)
         self.joint_names = RobotModel.load().joint_names
         self.lock = threading.Lock()
         self.last_key: int | None = None
@@ -54,6 +63,8 @@ class AxisBridge(Node):
         self.sock.settimeout(0.05)
         self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
         self.pub_status = self.create_publisher(DiagnosticArray, 'axis_bridge/status', 10)
+        self.pub_axis = self.create_publisher(AxisStatus, 'axis_status', latched_qos())
+        self._axis_key = None
         self.create_subscription(JointState, 'torque_command', self.on_command, state_qos())
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(0.02, self.on_timer)
@@ -68,26 +79,50 @@ class AxisBridge(Node):
     def receive_loop(self) -> None:
         while self.running:
             try:
-                data, _ = self.sock.recvfrom(2048)
+                data, source = self.sock.recvfrom(2048)
             except socket.timeout:
                 continue
             except OSError:
                 return
+            if source != self.peer:
+                with self.lock:
+                    self.core.stats.rejected['foreign_peer'] += 1
+                continue
+            stamp_ns = self.get_clock().now().nanoseconds
             with self.lock:
                 state, event = self.core.on_datagram(data, time.monotonic())
                 if state is not None:
-                    self.last_key = state.stamp_ns
+                    self.last_key = stamp_ns
             if event:
-                self.get_logger().info(f'link {event}: states arriving (seq {state.seq})')
+                self.get_logger().info(f'link {event}: states arriving (seq {state.seq}, '
+                                       f'session {state.session:#010x})')
             if state is not None:
+                self._axis_status(state)
                 msg = JointState()
-                msg.header.stamp = Time(sec=state.stamp_ns // 1_000_000_000,
-                                        nanosec=state.stamp_ns % 1_000_000_000)
+                msg.header.stamp = Time(sec=stamp_ns // 1_000_000_000,
+                                        nanosec=stamp_ns % 1_000_000_000)
                 msg.name = self.joint_names
                 msg.position = state.q[:3].tolist()
                 msg.velocity = state.qd[:3].tolist()
                 msg.effort = state.tau[:3].tolist()
                 self.pub_state.publish(msg)
+
+    def _axis_status(self, state, force: bool = False) -> None:
+        """/axis_status from the axis computer's own report, on change (and periodically)."""
+        key = (state.motors_on, state.mode, state.error)
+        if key == self._axis_key and not force:
+            return
+        self._axis_key = key
+        m = AxisStatus(motors_on=bool(state.motors_on), brakes_engaged=not state.motors_on,
+                       error=int(state.error), error_text=error_text(state.error),
+                       source='axis_bridge')
+        m.header.stamp = self.get_clock().now().to_msg()
+        self.pub_axis.publish(m)
+        if state.error:
+            self.get_logger().error(f'axis computer error {state.error:#x}: '
+                                    f'{m.error_text} (reset with ~/reset)')
+        elif state.mode != MODE_TORQUE and not state.motors_on:
+            self.get_logger().info('axis computer idle on its brakes')
 
     def on_command(self, msg: JointState) -> None:
         key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
@@ -103,7 +138,7 @@ class AxisBridge(Node):
                 return
             data = self.core.on_command(tau, time.monotonic(), key)
         if data is not None:
-            self.sock.sendto(data, (self.axis_address, self.command_port))
+            self.sock.sendto(data, self.peer)
 
     def on_reset(self, request, response):
         with self.lock:
@@ -128,8 +163,10 @@ class AxisBridge(Node):
                       'commands_sent': s.commands_sent, 'late_commands': s.late_commands,
                       'unanswered': s.unanswered, 'link_losses': s.link_losses,
                       **{f'rejected_{k}': v for k, v in s.rejected.items()}}
+            values['resyncs'] = s.resyncs
             if st is not None:
-                values.update(axis_seq=st.seq, axis_motors_on=st.motors_on,
+                values.update(axis_seq=st.seq, axis_session=f'{st.session:#010x}',
+                              axis_motors_on=st.motors_on,
                               axis_mode=MODE_NAMES.get(st.mode, str(st.mode)),
                               axis_error=st.error)
         level = (DiagnosticStatus.OK if values['link_up'] and not values.get('axis_error')
@@ -141,6 +178,8 @@ class AxisBridge(Node):
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_status.publish(msg)
+        if st is not None:
+            self._axis_status(st, force=True)
 
     def destroy_node(self):
         self.running = False

@@ -1,9 +1,11 @@
-"""Axis-computer torque protocol, version 1: packet layout, encode, decode (no ROS imports).
+"""Axis-computer torque protocol, version 2: packet layout, encode, decode (no ROS imports).
 
 EGM-shaped UDP protocol with a torque payload (spec: doc/axis_protocol.md). The axis computer
 is the clock master: every 4.032 ms it sends a STATE packet; the external controller answers
 with a COMMAND packet carrying the same sequence number before the next cycle.
 All fields little-endian, fixed layout, CRC-32 (zlib) over everything before the CRC field.
+Version 2 adds a session id (random per start of the axis computer, echoed by every command)
+and the supervision error bits; the sequence rules are in ``SequenceTracker``.
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-VERSION = 1
+VERSION = 2
 N_JOINTS = 6
 MAGIC_STATE = b'IRBS'
 MAGIC_COMMAND = b'IRBC'
@@ -29,8 +31,19 @@ ERR_NONE = 0
 ERR_COMM_TIMEOUT = 1 << 0      # too many cycles without a valid command: brakes engaged
 ERR_BAD_COMMAND = 1 << 1       # a command was malformed or not finite
 ERR_TORQUE_LIMIT = 1 << 2      # a command exceeded the axis computer's torque limit
+ERR_POSITION_LIMIT = 1 << 3    # a joint left its position limits: brakes
+ERR_SPEED_LIMIT = 1 << 4       # a joint exceeded its speed limit: brakes
+ERROR_NAMES = {ERR_COMM_TIMEOUT: 'comm timeout', ERR_BAD_COMMAND: 'bad command',
+               ERR_TORQUE_LIMIT: 'torque limit', ERR_POSITION_LIMIT: 'position limit',
+               ERR_SPEED_LIMIT: 'speed limit'}
 
-_HEADER = struct.Struct('<4sHHIIQ')   # magic, version, size, seq, reserved (0), time [ns]
+
+def error_text(error: int) -> str:
+    """The error bits in words ('' for none)."""
+    return ', '.join(name for bit, name in ERROR_NAMES.items() if error & bit) or (
+        f'unknown error {error:#x}' if error else '')
+
+_HEADER = struct.Struct('<4sHHIIQ')   # magic, version, size, seq, session, time [ns]
 _STATE_BODY = struct.Struct(f'<{3 * N_JOINTS}dBBH')  # q, qd, tau, motors_on, mode, error
 _COMMAND_BODY = struct.Struct(f'<{N_JOINTS}dBBH')    # tau_ref, mode_request, reset, reserved
 _CRC = struct.Struct('<I')
@@ -41,9 +54,11 @@ COMMAND_SIZE = _HEADER.size + _COMMAND_BODY.size + _CRC.size
 class ProtocolError(ValueError):
     """A datagram is not a valid packet; ``reason`` is a short machine-readable key."""
 
-    def __init__(self, reason: str, detail: str):
+    def __init__(self, reason: str, detail: str, seq: int | None = None,
+                 session: int | None = None):
         super().__init__(f'{reason}: {detail}')
         self.reason = reason
+        self.seq, self.session = seq, session     # known when the frame itself was valid
 
 
 @dataclass
@@ -58,6 +73,7 @@ class StatePacket:
     motors_on: bool = True
     mode: int = MODE_TORQUE
     error: int = ERR_NONE
+    session: int = 0
 
 
 @dataclass
@@ -69,6 +85,7 @@ class CommandPacket:
     tau_ref: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     mode_request: int = MODE_TORQUE
     reset: bool = False
+    session: int = 0
 
 
 def _finish(head_and_body: bytes) -> bytes:
@@ -80,22 +97,22 @@ def encode_state(p: StatePacket) -> bytes:
     body = _STATE_BODY.pack(*np.asarray(p.q, float), *np.asarray(p.qd, float),
                             *np.asarray(p.tau, float), int(bool(p.motors_on)), int(p.mode),
                             int(p.error))
-    return _finish(_HEADER.pack(MAGIC_STATE, VERSION, STATE_SIZE, p.seq & 0xFFFFFFFF, 0,
-                                p.stamp_ns) + body)
+    return _finish(_HEADER.pack(MAGIC_STATE, VERSION, STATE_SIZE, p.seq & 0xFFFFFFFF,
+                                p.session & 0xFFFFFFFF, p.stamp_ns) + body)
 
 
 def encode_command(c: CommandPacket) -> bytes:
     """COMMAND_SIZE bytes for ``c``."""
     body = _COMMAND_BODY.pack(*np.asarray(c.tau_ref, float), int(c.mode_request),
                               int(bool(c.reset)), 0)
-    return _finish(_HEADER.pack(MAGIC_COMMAND, VERSION, COMMAND_SIZE, c.seq & 0xFFFFFFFF, 0,
-                                c.stamp_ns) + body)
+    return _finish(_HEADER.pack(MAGIC_COMMAND, VERSION, COMMAND_SIZE, c.seq & 0xFFFFFFFF,
+                                c.session & 0xFFFFFFFF, c.stamp_ns) + body)
 
 
-def _check(data: bytes, magic: bytes, size: int) -> tuple[int, int]:
+def _check(data: bytes, magic: bytes, size: int) -> tuple[int, int, int]:
     if len(data) != size:
         raise ProtocolError('size', f'{len(data)} bytes, expected {size}')
-    got_magic, version, declared, seq, _reserved, stamp = _HEADER.unpack_from(data)
+    got_magic, version, declared, seq, session, stamp = _HEADER.unpack_from(data)
     if got_magic != magic:
         raise ProtocolError('magic', f'{got_magic!r}, expected {magic!r}')
     if version != VERSION:
@@ -105,32 +122,76 @@ def _check(data: bytes, magic: bytes, size: int) -> tuple[int, int]:
     (crc,) = _CRC.unpack_from(data, size - _CRC.size)
     if crc != zlib.crc32(data[:size - _CRC.size]):
         raise ProtocolError('crc', 'checksum mismatch')
-    return seq, stamp
+    return seq, session, stamp
 
 
 def decode_state(data: bytes) -> StatePacket:
     """Parse and validate a STATE datagram; non-finite values raise ProtocolError('nan')."""
-    seq, stamp = _check(data, MAGIC_STATE, STATE_SIZE)
+    seq, session, stamp = _check(data, MAGIC_STATE, STATE_SIZE)
     v = _STATE_BODY.unpack_from(data, _HEADER.size)
     arr = np.array(v[:3 * N_JOINTS], float)
     if not np.all(np.isfinite(arr)):
-        raise ProtocolError('nan', 'non-finite joint value in state')
+        raise ProtocolError('nan', 'non-finite joint value in state', seq, session)
     n = N_JOINTS
     return StatePacket(seq, stamp, arr[:n], arr[n:2 * n], arr[2 * n:], bool(v[-3]), v[-2],
-                       v[-1])
+                       v[-1], session)
 
 
 def decode_command(data: bytes) -> CommandPacket:
     """Parse and validate a COMMAND datagram; non-finite torques raise ProtocolError('nan')."""
-    seq, stamp = _check(data, MAGIC_COMMAND, COMMAND_SIZE)
+    seq, session, stamp = _check(data, MAGIC_COMMAND, COMMAND_SIZE)
     v = _COMMAND_BODY.unpack_from(data, _HEADER.size)
     tau = np.array(v[:N_JOINTS], float)
     if not np.all(np.isfinite(tau)):
-        raise ProtocolError('nan', 'non-finite torque in command')
-    return CommandPacket(seq, stamp, tau, v[N_JOINTS], bool(v[N_JOINTS + 1]))
+        raise ProtocolError('nan', 'non-finite torque in command', seq, session)
+    return CommandPacket(seq, stamp, tau, v[N_JOINTS], bool(v[N_JOINTS + 1]), session)
 
 
 def seq_newer(a: int, b: int) -> bool:
     """True when sequence number ``a`` is after ``b`` (uint32 with wrap-around, RFC 1982)."""
     diff = (a - b) & 0xFFFFFFFF
     return 0 < diff < 0x80000000
+
+
+class SequenceTracker:
+    """Which states to accept: sessions, serial-number arithmetic, a bounded window, resync.
+
+    Within a session a state is accepted when its seq is 1 to ``window`` cycles after the last
+    accepted one (RFC 1982 arithmetic with wrap-around); equal is a duplicate, older is stale,
+    further ahead is a jump. A new session (the axis computer restarted, seq from 1 again) or a
+    jump is adopted only after ``confirm`` consecutive states (seq + 1 each) of it: the
+    resynchronisation handshake. One forged or stray packet, whatever its session or seq,
+    therefore changes nothing, and a real restart costs ``confirm`` cycles.
+    ``offer(session, seq)`` returns 'accept', 'resync' (accepted, a new reference adopted) or
+    the rejection reason ('duplicate', 'stale', 'jump', 'session').
+    """
+
+    def __init__(self, window: int = 250, confirm: int = 3):
+        self.window, self.confirm = window, confirm
+        self.session: int | None = None
+        self.seq: int | None = None
+        self._candidate: tuple[int, int, int] | None = None   # (session, seq, count)
+
+    def offer(self, session: int, seq: int) -> str:
+        if self.session is None:
+            self.session, self.seq = session, seq
+            return 'resync'
+        if session == self.session:
+            step = (seq - self.seq) & 0xFFFFFFFF
+            if step == 0:
+                return 'duplicate'
+            if step < 0x80000000 and step <= self.window:
+                self.seq, self._candidate = seq, None
+                return 'accept'
+            reason = 'stale' if step >= 0x80000000 else 'jump'
+        else:
+            reason = 'session'
+        c = self._candidate
+        if c is not None and c[0] == session and ((seq - c[1]) & 0xFFFFFFFF) == 1:
+            self._candidate = (session, seq, c[2] + 1)
+        else:
+            self._candidate = (session, seq, 1)
+        if self._candidate[2] >= self.confirm:
+            self.session, self.seq, self._candidate = session, seq, None
+            return 'resync'
+        return reason

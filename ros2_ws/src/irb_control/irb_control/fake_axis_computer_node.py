@@ -49,10 +49,15 @@ class FakeAxisComputer(Node):
         fault_seed = declare(self, 'fault_seed', 0, 'fault random seed')
         model = RobotModel.load()
         _, friction = load_plant_friction(ffile or str(default_plant_yaml()), model.joint_names)
+        # the axis core supervises the commands (miss_limit): the plant's own timeout is off
         plant = Plant(model, friction, PlantConfig(period_s=self.period,
-                                                   initial_q=tuple(initial), seed=seed))
+                                                   initial_q=tuple(initial), seed=seed,
+                                                   command_timeout_s=1e9))
+        controller = (self.bridge_address, self.state_port) if declare(
+            self, 'bound_controller_only', True, 'take commands only from the bridge address '
+            'and its state port (the socket it sends commands from)') else None
         self.core = FakeAxisCore(plant, FaultConfig(**faults, delay_s=delay_s, seed=fault_seed),
-                                 miss_limit)
+                                 miss_limit, controller=controller)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((bind_address, command_port))
         self.sock.setblocking(False)
@@ -97,10 +102,10 @@ class FakeAxisComputer(Node):
                 ready, _, _ = select.select([self.sock], [], [], max(0.0, wake - now))
                 if ready:
                     try:
-                        data, _ = self.sock.recvfrom(2048)
+                        data, source = self.sock.recvfrom(2048)
                     except BlockingIOError:
                         continue
-                    if self.core.on_datagram(data) and t_state_sent is not None:
+                    if self.core.on_datagram(data, source) and t_state_sent is not None:
                         self.latencies.append(time.monotonic() - t_state_sent)
             self.core.end_cycle()
             self._log_events()

@@ -4,9 +4,15 @@ Per cycle: ``begin_cycle()`` measures the plant and returns the STATE datagram(s
 the configured faults applied), ``on_datagram()`` takes the controller's answers, and
 ``end_cycle()`` applies the answer (or counts a miss) and advances the plant one period.
 External control is engaged by the first valid command (until then the robot idles on its
-brakes, as an EGM session waits for its first answer). Once engaged, like the real robot
-dropping out of external control, ``miss_limit`` consecutive cycles without a valid command
-engage the brakes and latch ERR_COMM_TIMEOUT until a command with reset = 1.
+brakes, as an EGM session waits for its first answer). It supervises like the real one, every
+fault engaging the brakes and latching its error bit until a command with reset = 1 from the
+bound controller: ``miss_limit`` consecutive cycles without a valid command (ERR_COMM_TIMEOUT),
+a malformed or non-finite command for the current cycle, an unknown mode request or a torque
+for the locked joints 4-6 (ERR_BAD_COMMAND), a torque over the limit (ERR_TORQUE_LIMIT), a joint
+outside its position limits (ERR_POSITION_LIMIT) or over its speed limit (ERR_SPEED_LIMIT).
+``mode_request`` 0 leaves external control (brakes, no error). Only datagrams from the bound
+controller (address and port) are looked at, and only with this session's id (random per
+start).
 """
 from __future__ import annotations
 
@@ -15,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axis_protocol import (ERR_COMM_TIMEOUT, ERR_NONE, ERR_TORQUE_LIMIT, MODE_IDLE,
-                            MODE_TORQUE, N_JOINTS, ProtocolError, StatePacket, decode_command,
-                            encode_state)
+from .axis_protocol import (ERR_BAD_COMMAND, ERR_COMM_TIMEOUT, ERR_NONE, ERR_POSITION_LIMIT,
+                            ERR_SPEED_LIMIT, ERR_TORQUE_LIMIT, MODE_IDLE, MODE_TORQUE, N_JOINTS,
+                            ProtocolError, StatePacket, decode_command, encode_state, error_text)
 from .plant import Plant
 
 FAULT_KINDS = ('drop', 'delay', 'duplicate', 'reorder', 'corrupt', 'nan')
@@ -52,7 +58,8 @@ class FakeAxisCore:
     """Plant + protocol + fault injection + the robot's reaction to missing commands."""
 
     def __init__(self, plant: Plant, faults: FaultConfig = FaultConfig(), miss_limit: int = 3,
-                 torque_limit: np.ndarray | None = None):
+                 torque_limit: np.ndarray | None = None, controller: tuple | None = None,
+                 session: int | None = None, speed_margin: float = 1.05):
         if miss_limit < 1:
             raise ValueError('miss_limit must be >= 1')
         self.plant = plant
@@ -61,6 +68,12 @@ class FakeAxisCore:
         self.torque_limit = (np.asarray(torque_limit, float) if torque_limit is not None
                              else plant.model.limits.torque)
         self.rng = np.random.default_rng(faults.seed)
+        self.controller = controller        # (address, port) commands are taken from
+        lim = plant.model.limits
+        self.q_lo, self.q_hi = lim.lower, lim.upper
+        self.v_max = lim.velocity * speed_margin
+        self.session = (int(np.random.default_rng().integers(1, 2 ** 32)) if session is None
+                        else int(session))
         self.seq = 0
         self.error = ERR_NONE
         self.engaged = False
@@ -86,7 +99,8 @@ class FakeAxisCore:
             q[0] = np.nan
         return StatePacket(self.seq, int(round(y.t * 1e9)), q, qd, tau,
                            motors_on=not self.plant.braked,
-                           mode=MODE_IDLE if self.latched else MODE_TORQUE, error=self.error)
+                           mode=MODE_TORQUE if self.engaged else MODE_IDLE, error=self.error,
+                           session=self.session)
 
     def begin_cycle(self) -> list[tuple[float, bytes]]:
         """Start cycle ``seq + 1``: datagrams to send as (offset [s] from now, bytes)."""
@@ -117,23 +131,49 @@ class FakeAxisCore:
             out.append((offset, data))
         return out
 
-    def on_datagram(self, data: bytes) -> bool:
-        """Take a COMMAND datagram; True when it is the valid answer to the current cycle."""
+    def on_datagram(self, data: bytes, source: tuple | None = None) -> bool:
+        """Take a COMMAND datagram from ``source`` (address, port); True when it is the valid
+        answer to the current cycle."""
+        if self.controller is not None and source is not None and \
+                tuple(source) != tuple(self.controller):
+            self.rejected['foreign_peer'] += 1
+            return False
         try:
             cmd = decode_command(data)
         except ProtocolError as exc:
             self.rejected[exc.reason] += 1
+            if (exc.seq == self.seq and exc.session == self.session and self.engaged
+                    and not self.latched):
+                self._latch(ERR_BAD_COMMAND, f'malformed command for this cycle ({exc})')
+            return False
+        if cmd.session != self.session:
+            self.rejected['wrong_session'] += 1
             return False
         if cmd.seq != self.seq:
             self.rejected['wrong_seq'] += 1
             return False
         if cmd.reset and self.latched:
             self.events.append(f'seq {self.seq}: reset received, error '
-                               f'{self.error:#x} cleared')
+                               f'{self.error:#x} ({error_text(self.error)}) cleared')
             self.error = ERR_NONE
             self.misses = 0
+            self.plant.clear_error()
         if self.latched:
             self.rejected['latched'] += 1
+            return False
+        if cmd.mode_request == MODE_IDLE:
+            if self.engaged:
+                self._leave('the controller requested idle')
+            self.rejected['idle_requested'] += 1
+            return False
+        if cmd.mode_request != MODE_TORQUE:
+            self.rejected['bad_mode'] += 1
+            self._latch(ERR_BAD_COMMAND, f'unknown mode request {cmd.mode_request}')
+            return False
+        if np.any(cmd.tau_ref[3:] != 0.0):
+            self.rejected['wrist_torque'] += 1
+            self._latch(ERR_BAD_COMMAND, 'torque for the locked joints 4-6 '
+                        f'{cmd.tau_ref[3:].tolist()}')
             return False
         tau = cmd.tau_ref[:3]
         if np.any(np.abs(tau) > self.torque_limit):
@@ -145,6 +185,13 @@ class FakeAxisCore:
         self.engaged = True
         return True
 
+    def _leave(self, why: str) -> None:
+        """Leave external control without an error: brakes on, idle."""
+        self.engaged = False
+        q, t = self.plant.state.q.copy(), self.plant.state.t
+        self.plant.reset(q, t=t)
+        self.events.append(f'seq {self.seq}: {why}: brakes engaged (no error)')
+
     def _latch(self, flag: int, why: str) -> None:
         self.error |= flag
         self.engaged = False
@@ -154,7 +201,8 @@ class FakeAxisCore:
                            'latched until reset')
 
     def end_cycle(self) -> None:
-        """Apply this cycle's command (or count a miss) and advance the plant one period."""
+        """Apply this cycle's command (or count a miss), advance the plant one period, and
+        supervise the joints (position and speed limits) whatever the commands."""
         if self._command is not None:
             self.misses = 0
             self.plant.command(self._command)
@@ -164,3 +212,13 @@ class FakeAxisCore:
             if self.misses >= self.miss_limit:
                 self._latch(ERR_COMM_TIMEOUT, f'{self.misses} cycles without a command')
         self.plant.step()
+        q, qd = self.plant.state.q, self.plant.state.qd
+        if not self.latched:
+            out = (q < self.q_lo) | (q > self.q_hi)
+            if np.any(out):
+                self._latch(ERR_POSITION_LIMIT, f'joint {int(np.argmax(out)) + 1} at '
+                            f'{q[np.argmax(out)]:.3f} rad outside its limits')
+            elif np.any(np.abs(qd) > self.v_max):
+                i = int(np.argmax(np.abs(qd) - self.v_max))
+                self._latch(ERR_SPEED_LIMIT, f'joint {i + 1} at {qd[i]:.3f} rad/s over its '
+                            'speed limit')

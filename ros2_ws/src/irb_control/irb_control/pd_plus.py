@@ -23,6 +23,13 @@ q, qd (3,) at time t [s]:
    error above ``max_tracking_error_rad`` latch the STOPPED state (no more commands: the drive
    brakes after its command timeout) until ``enable``; the command is rate limited and then
    clipped to the torque limits.
+
+One explicit state machine (``TRANSITIONS``: every state x every event, with its reason; the
+tests walk the whole table). A plan offered in any state is stored as the *pending* profile:
+it never changes the reference of a running motion or of the hold, and never clears a latched
+stop. Only ``enable`` (in IDLE, HOLD or STOPPED) takes the pending profile and starts the ramp
+from where the robot is; the stop reason stays readable after the stop is cleared
+(``last_stop_reason``).
 """
 from __future__ import annotations
 
@@ -35,7 +42,7 @@ from irb_description.friction import FrictionMap, JointFriction
 from irb_description.model import RobotModel
 from irb_description.path import CirclePath
 
-from .profiles import PathProfile, ProfileError, TimeTrajectory
+from .profiles import PathProfile, TimeTrajectory
 
 PERIOD_S = 0.004032
 
@@ -48,6 +55,51 @@ MODE_STOPPED = 4
 MODE_HOLD = 5
 MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME: 'time',
               MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
+MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
+
+# events of the state machine
+EV_ENABLE = 'enable'          # operator (or the documented auto-enable at start-up)
+EV_STOP = 'stop'              # operator stop, watchdog, fault, safety trip
+EV_PLAN = 'plan'              # a validated plan is offered
+EV_RAMP_DONE = 'ramp_done'    # the ramp reached the start of the profile
+EV_MOTION_DONE = 'motion_done'  # the profile ended
+EVENTS = (EV_ENABLE, EV_STOP, EV_PLAN, EV_RAMP_DONE, EV_MOTION_DONE)
+_ARRIVE = 'PATH or TIME'      # the profile's own mode (theta- or time-driven)
+
+#: (state, event) -> (next state, or None = refused and nothing changes; why)
+TRANSITIONS = {
+    (MODE_IDLE, EV_ENABLE): (MODE_RAMP, 'ramp from the current pose to the start'),
+    (MODE_IDLE, EV_STOP): (MODE_STOPPED, 'stop latched'),
+    (MODE_IDLE, EV_PLAN): (MODE_IDLE, 'stored as the pending profile'),
+    (MODE_IDLE, EV_RAMP_DONE): (None, 'not ramping'),
+    (MODE_IDLE, EV_MOTION_DONE): (None, 'not moving'),
+    (MODE_RAMP, EV_ENABLE): (None, 'already running (ramp)'),
+    (MODE_RAMP, EV_STOP): (MODE_STOPPED, 'stop latched'),
+    (MODE_RAMP, EV_PLAN): (MODE_RAMP, 'stored as pending: the running motion is not changed'),
+    (MODE_RAMP, EV_RAMP_DONE): (_ARRIVE, 'start of the profile reached'),
+    (MODE_RAMP, EV_MOTION_DONE): (None, 'the ramp ends with ramp_done'),
+    (MODE_PATH, EV_ENABLE): (None, 'already running (path)'),
+    (MODE_PATH, EV_STOP): (MODE_STOPPED, 'stop latched'),
+    (MODE_PATH, EV_PLAN): (MODE_PATH, 'stored as pending: the running motion is not changed'),
+    (MODE_PATH, EV_RAMP_DONE): (None, 'not ramping'),
+    (MODE_PATH, EV_MOTION_DONE): (MODE_HOLD, 'end of the path: hold the final pose'),
+    (MODE_TIME, EV_ENABLE): (None, 'already running (time)'),
+    (MODE_TIME, EV_STOP): (MODE_STOPPED, 'stop latched'),
+    (MODE_TIME, EV_PLAN): (MODE_TIME, 'stored as pending: the running motion is not changed'),
+    (MODE_TIME, EV_RAMP_DONE): (None, 'not ramping'),
+    (MODE_TIME, EV_MOTION_DONE): (MODE_HOLD, 'end of the trajectory: hold the final pose'),
+    (MODE_HOLD, EV_ENABLE): (MODE_RAMP, 'ramp from the held pose to the (pending) profile'),
+    (MODE_HOLD, EV_STOP): (MODE_STOPPED, 'stop latched'),
+    (MODE_HOLD, EV_PLAN): (MODE_HOLD, 'stored as pending: the hold is not changed'),
+    (MODE_HOLD, EV_RAMP_DONE): (None, 'not ramping'),
+    (MODE_HOLD, EV_MOTION_DONE): (None, 'already holding'),
+    (MODE_STOPPED, EV_ENABLE): (MODE_RAMP, 'latched stop cleared by enable; ramp from the '
+                                           'current pose'),
+    (MODE_STOPPED, EV_STOP): (MODE_STOPPED, 'already stopped (the first reason is kept)'),
+    (MODE_STOPPED, EV_PLAN): (MODE_STOPPED, 'stored as pending: a plan never clears a stop'),
+    (MODE_STOPPED, EV_RAMP_DONE): (None, 'stopped'),
+    (MODE_STOPPED, EV_MOTION_DONE): (None, 'stopped'),
+}
 
 
 def friction_blend(qd_ref: np.ndarray, qd_meas: np.ndarray, a: float = 0.25) -> np.ndarray:
@@ -228,9 +280,12 @@ class PdPlusController:
         self.q_hi = lim.upper - c.position_margin_rad
         self.e_max = np.asarray(c.max_tracking_error_rad, float)
         self.delta = c.prediction_samples * c.period_s
-        self.profile: PathProfile | TimeTrajectory | None = None
+        self.active: PathProfile | TimeTrajectory | None = None    # the running reference
+        self.pending: PathProfile | TimeTrajectory | None = None   # offered, not yet enabled
         self.mode = MODE_IDLE
         self.stop_reason = ''
+        self.last_stop_reason = ''
+        self._hold = None            # (q, qd = 0, qdd = 0) frozen when HOLD is entered
         self.rejected_inputs = 0
         self._enable_requested = False
         self._prev_tau: np.ndarray | None = None
@@ -238,6 +293,7 @@ class PdPlusController:
         self._theta_v = 0.0
         self._t0 = 0.0
         self._ramp_from = np.zeros(3)
+        self._ramp_to = np.zeros(3)
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
         self._circle = ((float(path.center[0]), float(path.center[1]), path.direction,
@@ -245,45 +301,67 @@ class PdPlusController:
         self._friction_par = _parametric_friction(friction)
 
     # --- commands ------------------------------------------------------------------------
-    def set_path_profile(self, profile: PathProfile) -> None:
-        """Use a theta-profile (theta-driven mode). ProfileError if it leaves the limits."""
-        self._set_profile(profile)
+    def _transition(self, event: str) -> tuple[int | None, str]:
+        """Look ``event`` up in TRANSITIONS for the current state: (next state or None, why)."""
+        nxt, why = TRANSITIONS[(self.mode, event)]
+        if nxt == _ARRIVE:
+            nxt = MODE_TIME if self.time_driven else MODE_PATH
+        return nxt, why
 
-    def set_time_trajectory(self, traj: TimeTrajectory) -> None:
-        """Use a time trajectory (time-driven mode). ProfileError if it leaves the limits."""
-        self._set_profile(traj)
+    def set_path_profile(self, profile: PathProfile) -> str:
+        """Offer a theta-profile (theta-driven mode). ProfileError if it leaves the limits;
+        else it becomes the pending profile (see the module docstring)."""
+        return self._offer(profile)
 
-    def _set_profile(self, profile) -> None:
-        if self.mode in (MODE_RAMP, MODE_PATH, MODE_TIME):
-            raise ProfileError('cannot change the profile while moving; stop first')
+    def set_time_trajectory(self, traj: TimeTrajectory) -> str:
+        """Offer a time trajectory (time-driven mode); as ``set_path_profile``."""
+        return self._offer(traj)
+
+    def _offer(self, profile) -> str:
         profile.check_limits(self.model, self.config.velocity_limit_fraction)
-        self.profile = profile
+        _, why = self._transition(EV_PLAN)
+        self.pending = profile
+        return why
+
+    @property
+    def profile(self):
+        """The profile the next enable runs: the pending one if any, else the active one."""
+        return self.pending if self.pending is not None else self.active
 
     def enable(self) -> tuple[bool, str]:
-        """Request motion: clears a latched stop; the next valid sample starts the ramp."""
+        """Request motion: takes the pending profile, clears a latched stop (its reason stays
+        in ``last_stop_reason``); the next valid sample starts the ramp from where the robot
+        is. Refused while moving or without a profile."""
+        nxt, why = self._transition(EV_ENABLE)
+        if nxt is None:
+            return False, why
         if self.profile is None:
             return False, 'no profile'
-        if self.mode in (MODE_RAMP, MODE_PATH, MODE_TIME):
-            return True, f'already running ({MODE_NAMES[self.mode]})'
+        if self.pending is not None:
+            self.active, self.pending = self.pending, None
         self._enable_requested = True
         self.stop_reason = ''
-        self.mode = MODE_IDLE
-        return True, 'enabled: ramp to the start on the next sample'
+        self.mode = MODE_IDLE         # the ramp starts on the next valid sample
+        return True, f'enabled: {why}'
 
     def stop(self, reason: str) -> None:
-        """Latch STOPPED with ``reason``; no command is sent until ``enable``."""
+        """Latch STOPPED with ``reason`` (the first reason is kept); no command is sent until
+        ``enable``."""
         if self.mode != MODE_STOPPED:
             self.stop_reason = reason
+            self.last_stop_reason = reason
         self.mode = MODE_STOPPED
         self._enable_requested = False
         self._prev_tau = None
 
     @property
     def time_driven(self) -> bool:
-        return isinstance(self.profile, TimeTrajectory)
+        """Whether the active (else the pending) profile is a time trajectory."""
+        prof = self.active if self.active is not None else self.pending
+        return isinstance(prof, TimeTrajectory)
 
     def start_pose(self) -> np.ndarray:
-        """Joint position (3,) [rad] where the profile starts."""
+        """Joint position (3,) [rad] where the next motion starts (pending, else active)."""
         return self.profile.q[0].copy()
 
     # --- the step ------------------------------------------------------------------------
@@ -316,13 +394,14 @@ class PdPlusController:
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
+        prof = self.active          # the running reference: offered plans wait in pending
         if self.mode == MODE_IDLE:
-            if not self._enable_requested or self.profile is None:
+            if not self._enable_requested or prof is None:
                 return ControlOutput(False, np.zeros(3), self.mode)
             self._enable_requested = False
             self._ramp_from = q.copy()
-            start = self.start_pose()
-            self._ramp_T = ramp_duration(q, start, self.model.limits.velocity,
+            self._ramp_to = prof.q[0].copy()
+            self._ramp_T = ramp_duration(q, self._ramp_to, self.model.limits.velocity,
                                          self.config.ramp_min_duration_s,
                                          self.config.ramp_speed_fraction)
             self._t0 = t
@@ -332,21 +411,24 @@ class PdPlusController:
         theta = theta_p = theta_dot_ref = math.nan
         d = self.delta
         tp = t + d
+        time_driven = isinstance(prof, TimeTrajectory)
         if self.mode == MODE_RAMP and tp - self._t0 >= self._ramp_T:
-            self.mode = MODE_TIME if self.time_driven else MODE_PATH
+            self.mode = self._transition(EV_RAMP_DONE)[0]
             self._t0 = self._t0 + self._ramp_T     # time origin of the profile
-            self._theta = self.profile.theta_start if not self.time_driven else 0.0
+            self._theta = prof.theta_start if not time_driven else 0.0
             self._theta_v = self._theta
         if self.mode == MODE_RAMP:
             q_ref, qd_ref, qdd_ref = (x.tolist() for x in quintic_ramp(
-                self._ramp_from, self.start_pose(), self._ramp_T, tp - self._t0))
-        elif self.mode == MODE_TIME or (self.mode == MODE_HOLD and self.time_driven):
-            row = self.profile.sample_list(tp - self._t0)
+                self._ramp_from, self._ramp_to, self._ramp_T, tp - self._t0))
+        elif self.mode == MODE_TIME:
+            row = prof.sample_list(tp - self._t0)
             q_ref, qd_ref, qdd_ref = row[0:3], row[3:6], row[6:9]
-            if tp - self._t0 >= self.profile.duration and self.mode == MODE_TIME:
-                self.mode = MODE_HOLD
+            if tp - self._t0 >= prof.duration:
+                self.mode = self._transition(EV_MOTION_DONE)[0]
+                self._hold = prof.q[-1].tolist()
+        elif self.mode == MODE_HOLD and time_driven:
+            q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
         else:   # PATH or HOLD on a theta-profile
-            prof = self.profile
             raw = self._theta_of(q)
             # unwrap against the previous theta, clamp to the profile
             dth = (raw - self._theta + math.pi) % (2 * math.pi) - math.pi
@@ -363,8 +445,10 @@ class PdPlusController:
                 th = min(th + T * prof.h(th), prof.theta_end)
             theta_p = th
             if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
-                self.mode = MODE_HOLD
-                q_ref, qd_ref, qdd_ref = prof.q[-1].tolist(), [0.0] * 3, [0.0] * 3
+                if self.mode != MODE_HOLD:
+                    self.mode = self._transition(EV_MOTION_DONE)[0]
+                    self._hold = prof.q[-1].tolist()
+                q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
                 theta_dot_ref = 0.0
             else:
                 row = prof.sample_list(th)

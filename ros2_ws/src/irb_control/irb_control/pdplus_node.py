@@ -2,30 +2,37 @@
 
 /joint_states in -> PdPlusController.step -> /torque_command and /controller_state out, one
 message each per sample. Profile from /planned_trajectory (latched) or the built-in default.
+
+Threads: the control thread (executor: joint states, services, axis status) does nothing but
+the step; plans are received, decoded and checked in a child process (plan_gate.py) whose
+results a reader thread offers to the controller (pending until enable); a watchdog thread
+judges the age of the last valid state on the steady clock. A state whose stamp is older than
+the watchdog limit (or in the future) is never answered, and a stall of pdplus itself (the
+control thread not run for longer than the limit) ends in a latched stop before anything is
+answered.
 """
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import numpy as np
 from irb_description.model import RobotModel
 from irb_description.node_main import declare, latched_qos, run_node, state_qos
 from irb_description.path import CirclePath
-from irb_interfaces.msg import ControllerState
-from rclpy.clock import Clock, ClockType
+from irb_interfaces.msg import AxisStatus, ControllerState, PlanStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
 from .node_util import declare_realtime, spin_with
-from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_PATH, MODE_RAMP, MODE_STOPPED, MODE_TIME,
-                      ControllerConfig, PdPlusController, SettleGate, Watchdog)
-from .profiles import ProfileError, default_circle_profile, sine_trajectory
-from .trajectory_io import profile_from_msg
+from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
+                      PdPlusController, SettleGate, Watchdog, ramp_duration)
+from .plan_gate import GateConfig, PlanGate, profile_from_result
+from .profiles import ProfileError, TimeTrajectory, default_circle_profile, sine_trajectory
 
 
 class PdPlusNode(Node):
@@ -69,14 +76,26 @@ class PdPlusNode(Node):
         par('path_radius', 0.15, 'circle radius [m]')
         par('path_start_angle', 0.0, 'circle start angle [rad]')
         par('path_direction', 1, 'circle direction: +1 counter-clockwise, -1 clockwise')
-        par('auto_enable', True, 'start moving once a profile exists, the joint states have '
-            'been steady for auto_enable_settle_s and torque_command has a subscriber')
+        par('auto_enable', True, 'at start-up only: start moving once a profile exists, the '
+            'joint states have been steady for auto_enable_settle_s and torque_command has a '
+            'subscriber (once; later motions need ~/enable)')
         par('auto_enable_settle_s', 0.25, 'auto_enable: joint states without a gap of more than '
             '3 periods for this long first [s] (real time only; 0 with use_sim_time)')
         par('watchdog_missed_samples', 3, 'safe stop after this many missing samples')
         par('watchdog_sim_time_timeout_s', 1.0, 'minimum watchdog timeout with use_sim_time '
             '(lockstep) [s]')
         par('deadline_s', 0.002, 'a step slower than this counts as a missed deadline [s]')
+        par('future_tolerance_s', 0.005, 'joint states stamped further in the future than this '
+            '(against this node\'s clock) are refused [s]')
+        par('max_plan_points', 20000, 'plans with more points are refused [-]')
+        par('max_plan_acceleration_rad_s2', 50.0, 'plans with a faster joint acceleration are '
+            'refused [rad/s^2]')
+        par('plan_torque_fraction', 0.9, 'plans whose feed-forward torque needs more than this '
+            'fraction of a torque limit are refused [-]')
+        par('max_ramp_s', 10.0, 'enable is refused when the ramp to the start would take '
+            'longer [s]')
+        par('require_axis_status', True, 'enable only once the simulator or axis bridge has '
+            'reported its status on axis_status, and never while it reports an error')
         par('executor', 'events', "'events' (EventsExecutor, spin_once loop) or 'single'")
         self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
         self.P = P
@@ -99,7 +118,6 @@ class PdPlusNode(Node):
         self.time_driven = P['reference_mode'] == 'time'
         self._set_builtin_profile()
         sim_time = self.get_parameter('use_sim_time').value
-        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.watchdog = Watchdog(cfg.period_s, P['watchdog_missed_samples'],
                                  P['watchdog_sim_time_timeout_s'] if sim_time else 0.0)
         self.missed = 0
@@ -107,18 +125,21 @@ class PdPlusNode(Node):
         # auto_enable waits for a steady stream and a matched command topic (at start-up DDS
         # discovery may still be going on: a ramp started then met a 17 ms gap or commands
         # nobody received, and ended in a safe stop)
-        self._auto_enable_pending = bool(P['auto_enable']) and self.ctrl.profile is not None
+        self._auto_enable_pending = bool(P['auto_enable'])
         self._settle = SettleGate(0.0 if sim_time else P['auto_enable_settle_s'], cfg.period_s)
         self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_qos())
         self.pub_state = self.create_publisher(ControllerState, 'controller_state', state_qos())
         self.create_subscription(JointState, 'joint_states', self.on_state_raw, state_qos(),
                                  raw=True)
-        self.create_subscription(JointTrajectory, 'planned_trajectory', self.on_plan,
+        self.create_subscription(AxisStatus, 'axis_status', self.on_axis_status,
                                  latched_qos())
+        self.pub_plan_status = self.create_publisher(PlanStatus, '~/plan_status',
+                                                     latched_qos())
+        self.plans_accepted = self.plans_refused = 0
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
-        self.create_timer(cfg.period_s, self.on_watchdog, clock=self.steady)
         self._names = list(self.model.joint_names)
+        self._last_q = None                     # the last measured pose (ramp check)
         self._name_key: tuple | None = None     # names of the last joint state ...
         self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
@@ -126,6 +147,30 @@ class PdPlusNode(Node):
         self._cmd_enc = JointStateEncoder(self._names, 0, 0, 3)
         self._state_enc = ControllerStateEncoder()
         self._deadline_s = float(P['deadline_s'])
+        self._future_s = float(P['future_tolerance_s'])
+        self.rejected_stale = 0             # states too old or from the future
+        self.axis: AxisStatus | None = None
+        self.last_plan: dict | None = None  # the plan gate's latest outcome
+        # one lock around every change of the controller: the step (control thread), the
+        # watchdog (its thread), plans (the gate's reader thread), enable/stop (services)
+        self._lock = threading.Lock()
+        self._last_valid: float | None = None     # steady time of the last valid state
+        self._closing = threading.Event()
+        self._watch = threading.Thread(target=self._watch_loop, name='pdplus_watchdog',
+                                       daemon=True)
+        self._watch.start()
+        self.gate = PlanGate(GateConfig(
+            topic=self.resolve_topic_name('planned_trajectory'),
+            namespace=self.get_namespace(), path_center=tuple(P['path_center']),
+            path_radius=P['path_radius'], path_start_angle=P['path_start_angle'],
+            path_direction=int(P['path_direction']), time_driven=self.time_driven,
+            min_theta_dot=P['min_theta_dot'],
+            velocity_limit_fraction=P['velocity_limit_fraction'],
+            max_points=int(P['max_plan_points']),
+            max_acceleration=P['max_plan_acceleration_rad_s2'],
+            torque_fraction=P['plan_torque_fraction'], friction_mode=P['friction_mode'],
+            friction_map_file=P['friction_map_file'],
+            domain_id=self.context.get_domain_id()), self.on_plan_result, self.on_gate_exit)
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
             f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")
@@ -168,68 +213,100 @@ class PdPlusNode(Node):
             self.get_logger().warn(f'joint_states refused: {exc}', throttle_duration_sec=1.0)
             return
         q, qd = self._select(names, position, velocity)
+        self._last_q = q
         self._on_sample(t_in, sec, nanosec, q, qd)
 
     def on_state(self, msg: JointState) -> None:
         """The same for a JointState message object."""
         t_in = time.perf_counter()
         q, qd = self._select(tuple(msg.name), msg.position, msg.velocity)
+        self._last_q = q
         self._on_sample(t_in, msg.header.stamp.sec, msg.header.stamp.nanosec, q, qd)
 
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
         # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
         stamp = sec + nanosec * 1e-9
+        age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+        if not -self._future_s <= age <= self.watchdog.timeout_s:
+            # too old to answer (it waited somewhere longer than the watchdog limit) or from
+            # the future: never answered, never counted as a deadline, the watchdog not fed
+            self.rejected_stale += 1
+            self.get_logger().warn(
+                f'joint_states stamped {stamp:.6f} s refused: '
+                + (f'{age * 1e3:.1f} ms old' if age > 0 else f'{-age * 1e3:.1f} ms in the '
+                   'future') + ' (clocks of the hosts?)', throttle_duration_sec=1.0)
+            return
         if self._auto_enable_pending:
             self._try_auto_enable(t_in)
-        was = self.ctrl.mode
-        out = self.ctrl.step(stamp, q, qd)
+        now = time.monotonic()              # CLOCK_MONOTONIC, as ROS's STEADY_TIME
+        with self._lock:
+            was = self.ctrl.mode
+            if (was in MOVING or was == MODE_HOLD) and self._last_valid is not None \
+                    and now - self._last_valid > self.watchdog.timeout_s:
+                # pdplus itself (or its input) stalled: stop before answering anything
+                self.ctrl.stop(f'stall: no valid joint_states processed for '
+                               f'{now - self._last_valid:.4f} s')
+            out = self.ctrl.step(stamp, q, qd)
         if out.publish:
             self.pub_cmd.publish(self._cmd_enc.encode(sec, nanosec, (), (), out.tau.tolist()))
         if not out.rejected_input:
-            # steady clock: time.monotonic() is CLOCK_MONOTONIC, as ROS's STEADY_TIME
-            self.watchdog.feed(time.monotonic())
-        T = self.ctrl.config.period_s
-        if self._last_stamp is not None and stamp - self._last_stamp > 1.5 * T:
-            self.missed += int(round((stamp - self._last_stamp) / T)) - 1
-        self._last_stamp = stamp
+            self._last_valid = now
+            self.watchdog.feed(now)
+            T = self.ctrl.config.period_s
+            if self._last_stamp is not None and 1.5 * T < stamp - self._last_stamp < 1.0:
+                self.missed += int(round((stamp - self._last_stamp) / T)) - 1
+            self._last_stamp = stamp
         dt = time.perf_counter() - t_in
         if dt > self._deadline_s:
             self.missed += 1
         if out.mode != was:
-            # one call site per severity: rclpy refuses a severity change at the same site
-            text = (f'mode {MODE_NAMES[was]} -> {MODE_NAMES[out.mode]}'
-                    + (f': {out.stop_reason}' if out.stop_reason else ''))
-            if out.mode == MODE_STOPPED:
-                self.get_logger().error(text)
-            else:
-                self.get_logger().info(text)
+            self._log_mode(was, out.mode, out.stop_reason)
         self.pub_state.publish(self._state_enc.encode(
             sec, nanosec, out.mode, out.stop_reason, float(out.theta),
             float(out.theta_predicted), float(out.theta_dot_ref),
             (out.q_ref.tolist(), out.qd_ref.tolist(), out.qdd_ref.tolist(),
              out.q_error.tolist(), out.qd_error.tolist(), out.tau_model.tolist(),
              out.tau_friction.tolist(), out.tau_feedback.tolist(), out.tau.tolist()),
-            self.missed, self.ctrl.rejected_inputs, dt))
+            self.missed, self.ctrl.rejected_inputs + self.rejected_stale, dt))
+
+    def _log_mode(self, was: int, mode: int, reason: str) -> None:
+        # one call site per severity: rclpy refuses a severity change at the same site
+        text = f'mode {MODE_NAMES[was]} -> {MODE_NAMES[mode]}' + (f': {reason}' if reason
+                                                                 else '')
+        if mode == MODE_STOPPED:
+            self.get_logger().error(text)
+        else:
+            self.get_logger().info(text)
 
     def _try_auto_enable(self, now: float) -> None:
-        """auto_enable: enable once the joint states have arrived without a gap of more than
-        3 periods for auto_enable_settle_s (SettleGate) and torque_command has a subscriber.
-        ``now``: the sample's arrival [s, perf_counter]."""
-        if not self._settle.feed(now):
+        """auto_enable (start-up only): enable once the joint states have arrived without a
+        gap of more than 3 periods for auto_enable_settle_s (SettleGate), torque_command has a
+        subscriber and a profile exists. ``now``: the sample's arrival [s, perf_counter]."""
+        if not self._settle.feed(now) or self.ctrl.profile is None:
             return
         if self.pub_cmd.get_subscription_count() == 0:
             self.get_logger().info('auto_enable: waiting for a subscriber of torque_command',
                                    throttle_duration_sec=5.0)
             return
-        self._auto_enable_pending = False
-        self.get_logger().info(f'auto_enable: {self.ctrl.enable()[1]}')
+        ok, text = self._enable()
+        if ok or 'axis' not in text:          # waiting for the axis status keeps it pending
+            self._auto_enable_pending = False
+        self.get_logger().info(f'auto_enable: {text}', throttle_duration_sec=5.0)
 
-    def on_watchdog(self) -> None:
-        if self.ctrl.mode in (MODE_RAMP, MODE_PATH, MODE_TIME, MODE_HOLD):
-            now = time.monotonic()          # the clock of watchdog.feed
-            if self.watchdog.expired(now):
-                self.ctrl.stop(f'watchdog: no valid joint_states for '
-                               f'{now - self.watchdog.last:.4f} s')
+    def _watch_loop(self) -> None:
+        """The watchdog on a thread of its own: every half period, on the steady clock, the age
+        of the last valid state while moving or holding; older than the limit -> latched stop
+        (also when the control thread itself is stuck)."""
+        period = 0.5 * self.ctrl.config.period_s
+        while not self._closing.wait(period):
+            now = time.monotonic()
+            last = self._last_valid
+            if (self.ctrl.mode in MOVING or self.ctrl.mode == MODE_HOLD) and last is not None \
+                    and now - last > self.watchdog.timeout_s:
+                with self._lock:
+                    if self.ctrl.mode == MODE_STOPPED:
+                        continue
+                    self.ctrl.stop(f'watchdog: no valid joint_states for {now - last:.4f} s')
                 self.get_logger().error(f'safe stop: {self.ctrl.stop_reason}')
                 self._publish_stopped()
 
@@ -239,42 +316,100 @@ class PdPlusNode(Node):
         s.mode = MODE_STOPPED
         s.stop_reason = self.ctrl.stop_reason
         s.missed_deadlines = self.missed
-        s.rejected_inputs = self.ctrl.rejected_inputs
+        s.rejected_inputs = self.ctrl.rejected_inputs + self.rejected_stale
         self.pub_state.publish(s)
 
-    def on_plan(self, msg: JointTrajectory) -> None:
-        try:
-            prof = profile_from_msg(msg, self.model, self.path, self.time_driven,
-                                    self.P['min_theta_dot'])
-            if self.time_driven and not hasattr(prof, 'duration'):
-                raise ProfileError('time-driven mode needs a time trajectory')
-            if hasattr(prof, 'duration'):
-                self.ctrl.set_time_trajectory(prof)
-            else:
-                self.ctrl.set_path_profile(prof)
-        except ProfileError as exc:
-            self.get_logger().error(f'planned_trajectory rejected: {exc}')
-            return
-        self.get_logger().info(f'new profile from planned_trajectory ({len(msg.points)} '
-                               f'points, joints {list(msg.joint_names)})')
-        if self.P['auto_enable']:
-            self._auto_enable_pending = True
+    def on_plan_result(self, result: dict) -> None:
+        """A plan the gate process checked (reader thread): offered to the controller, where it
+        waits for enable; or the reason it was refused. Either way ~/plan_status says so."""
+        if result.get('ok'):
+            try:
+                prof = profile_from_result(result)
+                if self.time_driven != isinstance(prof, TimeTrajectory):
+                    raise ProfileError(f"{'time' if self.time_driven else 'theta'}-driven mode "
+                                       f"cannot use a {result['kind']} profile")
+                with self._lock:
+                    why = (self.ctrl.set_time_trajectory(prof) if self.time_driven
+                           else self.ctrl.set_path_profile(prof))
+            except ProfileError as exc:
+                result = dict(result, ok=False, reason=str(exc))
+        sm = result.get('summary', {})
+        status = PlanStatus(accepted=bool(result.get('ok')), reason=result.get('reason', ''),
+                            points=int(sm.get('points', result.get('points', 0))),
+                            duration=float(sm.get('duration_s', 0.0)))
+        sec, nanosec = result.get('stamp', (0, 0))
+        status.plan_stamp.sec, status.plan_stamp.nanosec = int(sec), int(nanosec)
+        if status.accepted:
+            self.plans_accepted += 1
+            self.get_logger().info(f'planned_trajectory accepted ({status.points} points, '
+                                   f'{status.duration:.3f} s): {why}; it starts on ~/enable')
+        else:
+            self.plans_refused += 1
+            self.get_logger().error(f'planned_trajectory refused: {status.reason}')
+        status.accepted_count, status.refused_count = self.plans_accepted, self.plans_refused
+        status.header.stamp = self.get_clock().now().to_msg()
+        self.last_plan = result
+        self.pub_plan_status.publish(status)
+
+    def on_gate_exit(self, text: str) -> None:
+        self.get_logger().error(text)
+
+    def on_axis_status(self, msg: AxisStatus) -> None:
+        """The drives' status: an error while moving is a latched stop."""
+        old, self.axis = self.axis, msg
+        if msg.error and (old is None or not old.error):
+            self.get_logger().error(f'{msg.source}: error {msg.error:#x} ({msg.error_text}); '
+                                    'enable is refused until it is reset')
+        if msg.error and self.ctrl.mode != MODE_STOPPED:
+            with self._lock:
+                self.ctrl.stop(f'{msg.source} reports error {msg.error:#x}: {msg.error_text}')
+            self._publish_stopped()
+
+    def _enable(self) -> tuple[bool, str]:
+        """Enable, after the checks that cannot wait for the ramp: the drives report no error
+        (and report at all, with require_axis_status), the ramp from where the robot is to the
+        start takes at most max_ramp_s."""
+        if self.axis is None and self.P['require_axis_status']:
+            return False, ('no axis status yet (simulator or axis_bridge on axis_status): '
+                           'refusing to move')
+        if self.axis is not None and self.axis.error:
+            return False, (f'{self.axis.source} reports error {self.axis.error:#x} '
+                           f'({self.axis.error_text}): reset it first')
+        with self._lock:
+            prof = self.ctrl.profile
+            if prof is not None and self._last_q is not None:
+                need = ramp_duration(self._last_q, prof.q[0], self.model.limits.velocity,
+                                     self.ctrl.config.ramp_min_duration_s,
+                                     self.ctrl.config.ramp_speed_fraction)
+                if need > self.P['max_ramp_s']:
+                    return False, (f'the start of the profile is {need:.1f} s of ramp away '
+                                   f"(> max_ramp_s = {self.P['max_ramp_s']} s)")
+            ok, text = self.ctrl.enable()
+        if ok:
+            self._auto_enable_pending = False
+            self.watchdog.reset()
+            self._last_valid = None
+        return ok, text
 
     def on_enable(self, request, response):
         self._auto_enable_pending = False
-        response.success, response.message = self.ctrl.enable()
-        if response.success:
-            self.watchdog.reset()
+        response.success, response.message = self._enable()
         self.get_logger().info(f'enable: {response.message}')
         return response
 
     def on_stop(self, request, response):
         self._auto_enable_pending = False          # a stop is never undone automatically
-        self.ctrl.stop('stop service')
+        with self._lock:
+            self.ctrl.stop('stop service')
         self._publish_stopped()
         response.success, response.message = True, 'stopped (latched until enable)'
         self.get_logger().warn('stop service: safe stop latched')
         return response
+
+    def destroy_node(self):
+        self._closing.set()
+        self.gate.stop()
+        return super().destroy_node()
 
     def _select(self, names: tuple, position, velocity):
         """q, qd of joints 1-3 by name (the index lookup cached while the names repeat);

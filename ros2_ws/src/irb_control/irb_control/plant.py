@@ -17,8 +17,10 @@ F_v v is explicit (h F_v / M_ii < 0.01 here).
 
 Command path: ``command(tau)`` hands the plant the answer to the latest measurement; a command
 answering the measurement at t_k acts on the plant from t_{k + delay_samples} (default 3),
-held constant over the period. No command for longer than ``command_timeout_s`` engages the
-brakes: applied torque 0, velocity 0, position held; the next command releases them.
+held constant over the period. Brakes: the robot starts on its brakes and the first command
+releases them. Once commanded, no command for longer than ``command_timeout_s`` engages the
+brakes (applied torque 0, velocity 0, position held) and *latches* the error, like the axis
+computer: every command is ignored until ``clear_error()`` (the simulator's ~/reset).
 Sensors: encoder-like joint measurement (quantisation + Gaussian noise) each period, and a
 camera that samples the TCP position every ``camera_period_s`` with ``camera_noise_m`` noise
 (per axis).
@@ -105,7 +107,7 @@ class PlantConfig:
     substeps: int = 5
     delay_samples: int = 3
     initial_q: tuple = (0.0, 0.90, 0.25)
-    command_timeout_s: float = 0.05
+    command_timeout_s: float = 0.0121    # 3 periods, as the axis computer's miss limit
     encoder_resolution_rad: float = 2.0e-6
     position_noise_rad: float = 1.0e-6
     velocity_noise_rad_s: float = 1.0e-3
@@ -183,6 +185,7 @@ class Plant:
         self._last_command_t = -math.inf
         self.applied = np.zeros(3)
         self.braked = True
+        self.error = ''              # latched fault ('' = none): commands ignored until cleared
         self.friction_torque = np.zeros(3)
         self._tau_t = [0.0, 0.0, 0.0]
         if self.effects:
@@ -191,6 +194,14 @@ class Plant:
         self._next_camera_t = self.state.t
         self.camera.clear()
         self.steps = 0
+        self.rejected_latched = 0
+
+    def clear_error(self) -> str:
+        """Clear a latched error (the brakes stay on until the next command); its text."""
+        was, self.error = self.error, ''
+        if was:
+            self.events.append((self.state.t, f'error reset: {was}'))
+        return was
 
     def command(self, tau: np.ndarray) -> None:
         """Hand over the torque command (3,) [N m] answering the latest measurement.
@@ -200,6 +211,9 @@ class Plant:
         tau = np.asarray(tau, float)
         if tau.shape != (3,) or not all(map(math.isfinite, tau.tolist())):
             self.events.append((self.state.t, f'rejected invalid command {tau!r}'))
+            return
+        if self.error:
+            self.rejected_latched += 1
             return
         self._latest = tau.copy()
         self._last_command_t = self.state.t
@@ -242,9 +256,10 @@ class Plant:
         s = self.state
         stale = s.t - self._last_command_t > c.command_timeout_s + 1e-9
         if stale and self._latest is not None:
-            self.events.append((s.t, f'no command for {s.t - self._last_command_t:.4f} s '
-                                     f'(> {c.command_timeout_s} s): brakes engaged, '
-                                     'torque 0'))
+            self.error = (f'no command for {s.t - self._last_command_t:.4f} s '
+                          f'(> {c.command_timeout_s} s)')
+            self.events.append((s.t, f'{self.error}: brakes engaged, torque 0, error latched '
+                                     'until reset'))
             self._latest = None
             self._pipeline = deque([None] * c.delay_samples)
         self._pipeline.append(self._latest)

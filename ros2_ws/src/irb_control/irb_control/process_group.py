@@ -26,6 +26,15 @@ class ProcessSpec:
     env: dict = field(default_factory=dict)
 
 
+def interrupt(proc: subprocess.Popen) -> None:
+    """Ctrl-C for a process started in a session of its own (``start_new_session``): SIGINT to
+    its whole group, once each, as a terminal does (``ros2 run`` does not forward it)."""
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+    except ProcessLookupError:
+        pass
+
+
 def ros2_run_cmd(package: str, executable: str, params_file: str | None = None,
                  params: dict | None = None, remaps: dict | None = None,
                  node_name: str | None = None, extra: tuple[str, ...] = ()) -> tuple[str, ...]:
@@ -138,11 +147,10 @@ class ProcessGroup:
             if not alive:
                 break
             for p in alive:
+                # the whole session, as a terminal's Ctrl-C: `ros2 run` does not forward
+                # SIGINT, every process of the group gets it once
                 try:
-                    if sig == signal.SIGINT:    # the leader only: `ros2 run` forwards it, and
-                        os.kill(p.pid, sig)     # a second SIGINT would break the node's cleanup
-                    else:
-                        os.killpg(p.pid, sig)   # the whole session: ros2 run and its child
+                    os.killpg(p.pid, sig)
                 except ProcessLookupError:
                     pass
             deadline = time.monotonic() + (self.stop_timeout_s if sig != signal.SIGKILL

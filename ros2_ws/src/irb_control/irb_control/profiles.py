@@ -295,5 +295,4 @@ def sine_trajectory(q0: np.ndarray, joint: int, peak_speed: float, amplitude: fl
     q[:, joint] += amplitude * (1 - np.cos(w * t))
     qd[:, joint] = amplitude * w * np.sin(w * t)
     qdd[:, joint] = amplitude * w**2 * np.cos(w * t)
-    qdd[-1, joint] = 0.0
     return TimeTrajectory(t, q, qd, qdd)

@@ -15,12 +15,14 @@ import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, state_qos
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from irb_interfaces.msg import AxisStatus
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import apply_realtime, declare_realtime, make_executor
@@ -70,6 +72,8 @@ class SimulatorNode(Node):
             'plant_effects_file': declare(self, 'plant_effects_file', '',
                                           "YAML with an 'effects:' section; '' = the plant "
                                           'friction file (no section: no effects)'),
+            'status_period_s': declare(self, 'status_period_s', 0.1,
+                                       'axis_status at least this often (and on change) [s]'),
             'lockstep_wait_s': declare(self, 'lockstep_wait_s', 0.05,
                                        'lockstep: wall time to wait for a command [s]'),
             'stats_path': declare(self, 'stats_path', '',
@@ -103,6 +107,11 @@ class SimulatorNode(Node):
                           if self.lockstep else None)
         self.create_subscription(JointState, 'torque_command', self.on_command_raw,
                                  state_qos(), raw=True)
+        # the drives' status, as the axis computer reports it; errors latch until ~/reset
+        self.pub_status = self.create_publisher(AxisStatus, 'axis_status', latched_qos())
+        self.create_service(Trigger, '~/reset', self.on_reset)
+        self._status_key = None
+        self._status_due = 0.0
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
         self._state_enc = JointStateEncoder(self.joint_names, 3, 3, 3)
         self._decoder = JointStateDecoder()
@@ -113,6 +122,8 @@ class SimulatorNode(Node):
         self._answered_k = -1
         self._k = 0
         self.latencies: list[float] = []
+        self.stale_commands = 0               # commands that did not answer the latest state
+        self.tick_late: list[float] = []      # [s] how late each state went out (real time)
         self.missed = 0
         self.missed_run = 0
         self.max_missed_run = 0
@@ -145,11 +156,16 @@ class SimulatorNode(Node):
             self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
                                    throttle_duration_sec=1.0)
             return
-        self.plant.command(tau)
         t_sent = self._sent.pop(sec * 1_000_000_000 + nanosec, None)
-        if t_sent is not None:
-            self.latencies.append(now - t_sent)
-            self._answered_k = self._k
+        if t_sent is None:
+            # not the answer to the latest state (as the axis computer, which applies only
+            # the command carrying the current cycle's sequence number): a late or stale
+            # command never acts on the robot
+            self.stale_commands += 1
+            return
+        self.plant.command(tau)
+        self.latencies.append(now - t_sent)
+        self._answered_k = self._k
 
     def _effort(self, names: tuple, effort) -> np.ndarray | None:
         """``_effort_by_name`` with the index lookup cached for repeated joint names."""
@@ -164,6 +180,28 @@ class SimulatorNode(Node):
             self._effort_idx = [idx[n] for n in self.joint_names]
         return tau
 
+    def on_reset(self, request, response):
+        """Clear a latched error (as the axis computer's reset): commands are taken again."""
+        was = self.plant.clear_error()
+        response.success = True
+        response.message = f'error cleared: {was}' if was else 'no error latched'
+        self.get_logger().info(f'reset: {response.message}')
+        self._status(force=True)
+        return response
+
+    def _status(self, force: bool = False) -> None:
+        """axis_status on every change of brakes/error and every status_period_s."""
+        p = self.plant
+        key = (p.braked, p.error)
+        now = time.monotonic()
+        if not force and key == self._status_key and now < self._status_due:
+            return
+        self._status_key, self._status_due = key, now + self.p['status_period_s']
+        m = AxisStatus(motors_on=not p.braked, brakes_engaged=p.braked,
+                       error=1 if p.error else 0, error_text=p.error, source='simulator')
+        m.header.stamp = self.get_clock().now().to_msg()
+        self.pub_status.publish(m)
+
     # --- loop ----------------------------------------------------------------------------
     def _publish_state(self, stamp: Time) -> None:
         y = self.plant.measure()
@@ -174,6 +212,7 @@ class SimulatorNode(Node):
         self.pub_state.publish(data)
 
     def _after_step(self, stamp_of) -> None:
+        self._status()
         for t, text in self.plant.events:
             self.get_logger().warn(f'[t = {t:.3f} s] {text}')
         self.plant.events.clear()
@@ -231,9 +270,21 @@ class SimulatorNode(Node):
             self._after_step(lambda t: _stamp(t0_ros + t))
             stamp = self.get_clock().now().to_msg()
             self._publish_state(stamp)
+            self.tick_late.append(time.monotonic() - next_tick)
             next_tick += T
             if time.monotonic() - next_tick > 10 * T:       # fell far behind: resynchronise
                 next_tick = time.monotonic() + T
+
+    def destroy_node(self):
+        """Write the statistics (after run_node has stopped listening to further Ctrl-C, so a
+        second one cannot cut this short), then destroy."""
+        if self.p['stats_path']:
+            try:
+                Path(self.p['stats_path']).write_text(json.dumps(self.stats(), indent=2))
+            except OSError as exc:
+                self.get_logger().error(f"statistics not written to {self.p['stats_path']}: "
+                                        f'{exc.strerror}')
+        return super().destroy_node()
 
     def stats(self) -> dict:
         lat = np.array(self.latencies) * 1e3
@@ -242,9 +293,19 @@ class SimulatorNode(Node):
                 'latency_ms': {'p50': q(50), 'p99': q(99), 'max': float(lat.max())
                                if lat.size else math.nan},
                 'missed_deadlines': self.missed, 'max_consecutive_missed': self.max_missed_run,
+                'stale_commands_ignored': self.stale_commands,
+                'state_publish_late_ms': _percentiles(np.array(self.tick_late) * 1e3),
                 'sim_time_s': self.plant.state.t,
                 'wall_time_s': time.monotonic() - self.t_wall0,
                 'energy_j': self.plant.state.energy}
+
+
+def _percentiles(x: np.ndarray) -> dict | None:
+    """p50/p99/max and the count of values above one period (4.032 ms) of ``x`` [ms]."""
+    if not x.size:
+        return None
+    return {'p50': float(np.percentile(x, 50)), 'p99': float(np.percentile(x, 99)),
+            'max': float(x.max()), 'over_one_period': int(np.sum(x > 4.032))}
 
 
 def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:
@@ -267,8 +328,6 @@ def _spin(node: SimulatorNode) -> None:
     try:
         node.run(executor)
     finally:
-        if node.p['stats_path']:
-            Path(node.p['stats_path']).write_text(json.dumps(node.stats(), indent=2))
         executor.shutdown()
 
 

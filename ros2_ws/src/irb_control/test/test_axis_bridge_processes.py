@@ -36,11 +36,10 @@ def free_udp_ports(n):
 
 
 def stop(proc):
-    """SIGINT to `ros2 run`, which forwards it to the node (SIGINT to the whole group made the
-    node get it twice, and a second KeyboardInterrupt during its clean-up printed a
-    traceback); SIGKILL to the group after 20 s."""
+    """Ctrl-C as a terminal sends it (SIGINT to the session's group: `ros2 run`, which does
+    not forward it, and the node, once each); SIGKILL to the group after 20 s."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:

@@ -9,12 +9,13 @@ from numpy.testing import assert_array_equal
 from irb_control.axis_bridge_core import BridgeCore
 from irb_control.axis_protocol import (COMMAND_SIZE, CYCLE_S, STATE_SIZE, CommandPacket,
                                        ProtocolError, StatePacket, decode_command,
-                                       decode_state, encode_command, encode_state, seq_newer)
+                                       SequenceTracker, decode_state, encode_command,
+                                       encode_state, seq_newer)
 
 
-def state(seq, q0=0.1):
+def state(seq, q0=0.1, session=77):
     return StatePacket(seq, seq * 4_032_000, np.full(6, q0), np.arange(6) * 0.1,
-                       np.arange(6) * -2.0, True, 1, 0)
+                       np.arange(6) * -2.0, True, 1, 0, session)
 
 
 def test_layout_sizes_are_fixed():
@@ -28,19 +29,21 @@ def test_state_round_trip_and_little_endian_header():
     p = state(0xFFFFFFF0)
     data = encode_state(p)
     assert data[:4] == b'IRBS'
-    assert struct.unpack_from('<H', data, 4)[0] == 1            # version, little-endian
+    assert struct.unpack_from('<H', data, 4)[0] == 2            # version, little-endian
+    assert struct.unpack_from('<I', data, 12)[0] == 77          # session
     assert struct.unpack_from('<I', data, 8)[0] == 0xFFFFFFF0   # sequence number
     back = decode_state(data)
-    assert back.seq == p.seq and back.stamp_ns == p.stamp_ns
+    assert back.seq == p.seq and back.stamp_ns == p.stamp_ns and back.session == 77
     for a in ('q', 'qd', 'tau'):
         assert_array_equal(getattr(back, a), getattr(p, a))
     assert (back.motors_on, back.mode, back.error) == (True, 1, 0)
 
 
 def test_command_round_trip():
-    c = CommandPacket(42, 123, np.array([1.5, -2, 3, 0, 0, 0.25]), 1, True)
+    c = CommandPacket(42, 123, np.array([1.5, -2, 3, 0, 0, 0.25]), 1, True, 0xABCDEF01)
     back = decode_command(encode_command(c))
     assert back.seq == 42 and back.reset and back.mode_request == 1
+    assert back.session == 0xABCDEF01
     assert_array_equal(back.tau_ref, c.tau_ref)
 
 
@@ -58,7 +61,7 @@ def recrc(data):
     (lambda d: d[:-1], 'size'),
     (lambda d: d + b'\0', 'size'),
     (lambda d: recrc(b'XXXX' + d[4:]), 'magic'),
-    (lambda d: recrc(d[:4] + struct.pack('<H', 2) + d[6:]), 'version'),
+    (lambda d: recrc(d[:4] + struct.pack('<H', 1) + d[6:]), 'version'),
     (lambda d: corrupt(d, 40), 'crc'),
     (lambda d: recrc(d[:24] + struct.pack('<d', float('nan')) + d[32:]), 'nan'),
     (lambda d: recrc(d[:24] + struct.pack('<d', float('inf')) + d[32:]), 'nan'),
@@ -84,7 +87,7 @@ def test_bridge_replies_with_the_state_sequence_number():
     s, event = b.on_datagram(encode_state(state(10)), now=0.0)
     assert s.seq == 10 and event == 'up'
     reply = b.on_command(np.ones(6), now=0.001)
-    assert decode_command(reply).seq == 10
+    assert decode_command(reply).seq == 10 and decode_command(reply).session == 77
     assert b.on_command(np.ones(6), now=0.002) is None          # one reply per state
     assert b.stats.commands_sent == 1 and b.stats.late_commands == 1
 
@@ -142,3 +145,41 @@ def test_reset_is_repeated_until_the_axis_computer_reports_no_error():
         assert decode_command(b.on_command(np.zeros(6), 0.004 * seq + 0.001)).reset
     b.on_datagram(encode_state(state(4)), 0.016)                        # error cleared
     assert not decode_command(b.on_command(np.zeros(6), 0.017)).reset
+
+
+def test_restart_of_the_axis_computer_is_followed_after_confirmation():
+    # issue 14 defect 6: after a restart (seq back to 1) 250 of 250 states were rejected
+    b = BridgeCore(resync_confirm=3)
+    for k in range(1000, 1010):
+        assert b.on_datagram(encode_state(state(k)), k * CYCLE_S)[0] is not None
+    got = [b.on_datagram(encode_state(state(k, session=78)), 2.0 + k * CYCLE_S)
+           for k in range(1, 6)]
+    assert [g[0] is not None for g in got] == [False, False, True, True, True]
+    assert got[2][1] == 'resync' and b.stats.resyncs == 1
+    assert b.stats.rejected['session'] == 2
+    reply = decode_command(b.on_command(np.zeros(6), 2.0 + 5 * CYCLE_S + 1e-4))
+    assert reply.session == 78 and reply.seq == 5
+
+
+def test_one_spoofed_packet_cannot_lock_the_link_out():
+    # defect 6: one valid packet with seq + 2^31 locked the link (460 of 460 states rejected)
+    b = BridgeCore()
+    for k in range(1, 11):
+        b.on_datagram(encode_state(state(k)), k * CYCLE_S)
+    assert b.on_datagram(encode_state(state(10 + 2 ** 31)), 0.05)[0] is None
+    assert b.on_datagram(encode_state(state(10 + 3000)), 0.05)[0] is None     # a jump
+    for k in range(11, 471):
+        assert b.on_datagram(encode_state(state(k)), k * CYCLE_S)[0] is not None
+    assert b.stats.rejected == {'stale': 1, 'jump': 1}
+
+
+def test_sequence_tracker_window_and_resync_after_a_real_gap():
+    tr = SequenceTracker(window=250, confirm=3)
+    assert tr.offer(5, 100) == 'resync'           # first contact
+    assert tr.offer(5, 101) == 'accept' and tr.offer(5, 101) == 'duplicate'
+    assert tr.offer(5, 351) == 'accept'           # 250 ahead: inside the window
+    assert tr.offer(5, 2000) == 'jump'            # packets lost for long: three in a row
+    assert tr.offer(5, 2001) == 'jump'
+    assert tr.offer(5, 2002) == 'resync'
+    assert tr.offer(5, 2003) == 'accept'
+    assert tr.offer(5, 2003 + 2 ** 31) == 'stale'

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from irb_control.axis_bridge_core import BridgeCore
-from irb_control.axis_protocol import (ERR_COMM_TIMEOUT, ERR_NONE, ERR_TORQUE_LIMIT,
+from irb_control.axis_protocol import (ERR_BAD_COMMAND, ERR_COMM_TIMEOUT, ERR_NONE,
+                                       ERR_POSITION_LIMIT, ERR_SPEED_LIMIT, ERR_TORQUE_LIMIT,
                                        MODE_IDLE, MODE_TORQUE, CommandPacket, decode_state,
                                        encode_command)
 from irb_control.fake_axis_core import FakeAxisCore, FaultConfig
@@ -15,10 +16,26 @@ def plant(model):
     return Plant(model, PlantFriction.from_map(model.friction), PlantConfig(seed=3))
 
 
-def command(seq, tau=(0.0, 0.0, 0.0), reset=False):
+SESSION = 0x5E5510
+
+CONTROLLER = ('127.0.0.1', 6510)
+
+
+def command(seq, tau=(0.0, 0.0, 0.0), reset=False, session=SESSION, mode=MODE_TORQUE,
+            wrist=(0.0, 0.0, 0.0)):
     t = np.zeros(6)
-    t[:3] = tau
-    return encode_command(CommandPacket(seq, 0, t, MODE_TORQUE, reset))
+    t[:3], t[3:] = tau, wrist
+    return encode_command(CommandPacket(seq, 0, t, mode, reset, session))
+
+
+def engaged(plant, **kw):
+    """A core in external control for 5 cycles, holding the robot."""
+    core = FakeAxisCore(plant, session=SESSION, controller=CONTROLLER, **kw)
+    for _ in range(5):
+        core.begin_cycle()
+        assert core.on_datagram(command(core.seq, hold_torque(plant)), CONTROLLER)
+        core.end_cycle()
+    return core
 
 
 def hold_torque(plant):
@@ -26,7 +43,7 @@ def hold_torque(plant):
 
 
 def test_round_trip_holds_the_robot_against_gravity(plant):
-    core = FakeAxisCore(plant)
+    core = FakeAxisCore(plant, session=SESSION)
     q0 = plant.state.q.copy()
     for _ in range(100):
         (offset, data), = core.begin_cycle()
@@ -42,7 +59,7 @@ def test_round_trip_holds_the_robot_against_gravity(plant):
 
 
 def test_misses_engage_brakes_and_latch_until_reset(plant):
-    core = FakeAxisCore(plant, miss_limit=3)
+    core = FakeAxisCore(plant, miss_limit=3, session=SESSION)
     for _ in range(5):
         core.begin_cycle()
         core.on_datagram(command(core.seq, hold_torque(plant)))
@@ -72,7 +89,7 @@ def test_no_timeout_before_external_control_is_engaged(plant):
 
 
 def test_wrong_sequence_and_garbage_are_rejected(plant):
-    core = FakeAxisCore(plant)
+    core = FakeAxisCore(plant, session=SESSION)
     core.begin_cycle()
     assert not core.on_datagram(command(core.seq - 1))
     assert not core.on_datagram(b'garbage')
@@ -80,7 +97,7 @@ def test_wrong_sequence_and_garbage_are_rejected(plant):
 
 
 def test_excessive_torque_latches_an_error(plant):
-    core = FakeAxisCore(plant)
+    core = FakeAxisCore(plant, session=SESSION)
     core.begin_cycle()
     assert not core.on_datagram(command(core.seq, (1e4, 0.0, 0.0)))
     assert core.error & ERR_TORQUE_LIMIT and plant.braked
@@ -115,6 +132,77 @@ def test_each_fault_kind_is_injected_and_handled_by_the_bridge(plant, kind):
         assert rejected[expected] > 0.5 * core.injected[kind], rejected
     if kind in ('drop', 'delay', 'reorder', 'corrupt', 'nan'):
         assert core.missed_total > 0           # those cycles got no valid answer in time
+
+
+def test_zero_torque_fall_latches_a_position_limit(plant):
+    # issue 14 defect 7: zero torque let joint 2 fall to 3.23 rad (limit 1.92) with no error
+    core = engaged(plant, miss_limit=10 ** 6)
+    for _ in range(2000):
+        core.begin_cycle()
+        core.on_datagram(command(core.seq), CONTROLLER)
+        core.end_cycle()
+        if core.latched:
+            break
+    assert core.error & (ERR_POSITION_LIMIT | ERR_SPEED_LIMIT) and plant.braked
+    lim = plant.model.limits
+    assert np.all(plant.state.q <= lim.upper + 0.05) and np.all(plant.state.q >= lim.lower - 0.05)
+
+
+@pytest.mark.parametrize('what, kwargs', [
+    ('nan', None), ('bad mode', dict(mode=7)), ('wrist torque', dict(wrist=(1e300, 0, 0)))])
+def test_bad_commands_latch_an_error(plant, what, kwargs):
+    # defect 7: ERR_BAD_COMMAND was never set; joints 4-6 accepted +-1e300
+    core = engaged(plant)
+    core.begin_cycle()
+    if kwargs is None:
+        data = bytearray(command(core.seq, hold_torque(plant)))
+        import struct
+        import zlib
+        struct.pack_into('<d', data, 24, float('nan'))
+        struct.pack_into('<I', data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
+        data = bytes(data)
+    else:
+        data = command(core.seq, hold_torque(plant), **kwargs)
+    assert not core.on_datagram(data, CONTROLLER)
+    assert core.error & ERR_BAD_COMMAND and plant.braked
+
+
+def test_idle_request_leaves_external_control_without_an_error(plant):
+    # defect 7: mode_request = 0 was ignored
+    core = engaged(plant)
+    core.begin_cycle()
+    assert not core.on_datagram(command(core.seq, mode=MODE_IDLE), CONTROLLER)
+    assert not core.engaged and core.error == ERR_NONE and plant.braked
+    core.end_cycle()
+    assert decode_state(core.begin_cycle()[0][1]).mode == MODE_IDLE
+
+
+def test_only_the_bound_controller_is_heard_and_may_reset(plant):
+    # defect 7: any sender could reset a latched error
+    core = engaged(plant, miss_limit=3)
+    for _ in range(3):
+        core.begin_cycle()
+        core.end_cycle()
+    assert core.error == ERR_COMM_TIMEOUT
+    core.begin_cycle()
+    assert not core.on_datagram(command(core.seq, reset=True), ('127.0.0.1', 9999))
+    assert not core.on_datagram(command(core.seq, reset=True, session=1), CONTROLLER)
+    assert core.error == ERR_COMM_TIMEOUT
+    assert core.rejected['foreign_peer'] == 1 and core.rejected['wrong_session'] == 1
+    assert core.on_datagram(command(core.seq, hold_torque(plant), reset=True), CONTROLLER)
+    assert core.error == ERR_NONE
+
+
+def test_speed_limit_latches(plant):
+    core = engaged(plant, miss_limit=10 ** 6)
+    big = np.array([600.0, 0.0, 0.0])            # accelerate joint 1 until over its limit
+    for _ in range(2000):
+        core.begin_cycle()
+        core.on_datagram(command(core.seq, hold_torque(plant) + big), CONTROLLER)
+        core.end_cycle()
+        if core.latched:
+            break
+    assert core.error & ERR_SPEED_LIMIT
 
 
 def test_fault_config_validation():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from irb_interfaces.msg import ControllerState  # noqa: E402
+from irb_interfaces.msg import AxisStatus, ControllerState  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.task import Future  # noqa: E402
@@ -32,6 +32,7 @@ def graph():
     ctrl = PdPlusNode(context=ctx, namespace=ns, parameter_overrides=[
         Parameter('executor', value='single')])
     peer = rclpy.create_node('peer', namespace=ns, context=ctx)
+    axis_ok(peer, ns)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(ctrl)
     ex.add_node(peer)
@@ -63,6 +64,19 @@ class Collector:
         return self.future
 
 
+def axis_ok(peer, ns, error=0):
+    """The drives' status as the simulator reports it (pdplus needs one to enable)."""
+    pub = peer.create_publisher(AxisStatus, f'{ns}/axis_status', latched_qos())
+    pub.publish(AxisStatus(motors_on=False, brakes_engaged=True, error=error,
+                           error_text='test error' if error else '', source='test'))
+    return pub
+
+
+def now_s(node):
+    """The node's clock [s]: joint states must be stamped fresh (pdplus checks their age)."""
+    return node.get_clock().now().nanoseconds * 1e-9
+
+
 def joint_state(stamp_s, q, qd=(0.0, 0.0, 0.0)):
     m = JointState(name=['joint_1', 'joint_2', 'joint_3'], position=list(q), velocity=list(qd),
                    effort=[0.0] * 3)
@@ -71,15 +85,10 @@ def joint_state(stamp_s, q, qd=(0.0, 0.0, 0.0)):
     return m
 
 
-def feed_joint_states(peer, ns, t0, q):
-    """A timer on ``peer`` publishing joint states at pose q every period, stamped t0 + k T."""
+def feed_joint_states(peer, ns, q):
+    """A timer on ``peer`` publishing joint states at pose q every period, stamped now."""
     pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
-    k = [0]
-
-    def feed():
-        k[0] += 1
-        pub.publish(joint_state(t0 + k[0] * T, q))
-    return peer.create_timer(T, feed)
+    return peer.create_timer(T, lambda: pub.publish(joint_state(now_s(peer), q)))
 
 
 def spin_for(ex, fut):
@@ -94,21 +103,31 @@ def test_command_answers_state_and_nan_is_rejected(graph):
     cmds = Collector(peer, JointState, f'{ns}/torque_command', state_qos())
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
     pub = peer.create_publisher(JointState, f'{ns}/joint_states', state_qos())
-    fut = cmds.expect(lambda m: m.header.stamp.sec == 100)
+    sent = []
+
+    def publish(q):
+        sent.append(joint_state(now_s(peer), q))
+        pub.publish(sent[-1])
+    fut = cmds.expect(lambda m: True)
     # publish until the (best-effort) subscription is matched and answered
-    timer = peer.create_timer(T, lambda: pub.publish(joint_state(100.0, q0)))
+    timer = peer.create_timer(T, lambda: publish(q0))
     cmd = spin_for(ex, fut)
     assert list(cmd.name) == ['joint_1', 'joint_2', 'joint_3']
+    assert cmd.header.stamp in [m.header.stamp for m in sent]       # answers a state
     g = ctrl.model.gravity(q0)
     assert np.allclose(cmd.effort, g, atol=60.0)     # about gravity + friction FF at rest
     peer.destroy_timer(timer)
-    n_cmds = len(cmds.msgs)
-    fut = states.expect(lambda m: m.rejected_inputs >= 1)
-    timer = peer.create_timer(T, lambda: pub.publish(joint_state(100.1, [np.nan, 0.0, 0.0])))
+    nan_stamps = []
+
+    def publish_nan():
+        publish([np.nan, 0.0, 0.0])
+        nan_stamps.append(sent[-1].header.stamp)
+    fut = states.expect(lambda m: m.rejected_inputs >= 3)
+    timer = peer.create_timer(T, publish_nan)
     st = spin_for(ex, fut)
     peer.destroy_timer(timer)
     assert all(np.isfinite(c.effort).all() for c in cmds.msgs)
-    assert len(cmds.msgs) == n_cmds                   # no command for the NaN samples
+    assert not [c for c in cmds.msgs if c.header.stamp in nan_stamps]   # never answered
     assert st.mode != ControllerState.MODE_STOPPED or 'watchdog' in st.stop_reason
 
 
@@ -117,7 +136,7 @@ def test_stop_enable_services_and_watchdog(graph):
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
     Collector(peer, JointState, f'{ns}/torque_command', state_qos())    # auto_enable needs it
-    timer = feed_joint_states(peer, ns, 10.0, q0)
+    timer = feed_joint_states(peer, ns, q0)
     spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
 
     stop = peer.create_client(Trigger, f'{ns}/pdplus/stop')
@@ -179,7 +198,11 @@ def test_hot_path_commands_identical_to_the_controller(graph):
 
     from irb_control.closed_loop import build_default
     from irb_control.pd_plus import PdPlusController
-    ctrl, _, _, _ = graph
+    ctrl, _, ex, _ = graph
+    _until(ex, lambda: ctrl.axis is not None)          # pdplus enables only with a status
+    # this test is about the commands, not freshness: states on simulated time from now on
+    ctrl.watchdog.timeout_s, ctrl._future_s = 10.0, 10.0
+    t0 = now_s(ctrl)
     ref = PdPlusController(ctrl.model, ctrl.path, ctrl.ctrl.config, ctrl.ctrl.friction)
     ref.set_path_profile(ctrl.ctrl.profile)
     ref.enable()
@@ -190,7 +213,7 @@ def test_hot_path_commands_identical_to_the_controller(graph):
     order = [2, 0, 1]
     for k in range(400):
         y = plant.measure()
-        t = 50.0 + k * T
+        t = t0 + k * T
         msg = joint_state(t, y.q.tolist(), y.qd.tolist())
         out = ref.step(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, y.q, y.qd)
         modes.add(out.mode)
@@ -219,7 +242,7 @@ def test_hot_path_commands_identical_to_the_controller(graph):
     # malformed bytes and a missing joint: refused, counted, no command
     n, r = len(ctrl.pub_cmd.sent), ctrl.ctrl.rejected_inputs
     ctrl.on_state_raw(b'\x00\x01\x00\x00\x01')
-    bad = joint_state(60.0, [0.1, 0.2])
+    bad = joint_state(now_s(ctrl), [0.1, 0.2])
     bad.name = ['joint_1', 'joint_2']
     ctrl.on_state_raw(serialize_message(bad))
     assert len(ctrl.pub_cmd.sent) == n and ctrl.ctrl.rejected_inputs == r + 2
@@ -262,7 +285,7 @@ def test_builtin_profile_none_waits_for_a_plan():
                           parameter_overrides=[Parameter('builtin_profile', value='none')])
         node.pub_cmd, node.pub_state = _Capture(), _Capture()
         assert node.ctrl.profile is None
-        node.on_state(joint_state(1.0, node.model.ik(np.array([0.75, 0.0, 0.13]))))
+        node.on_state(joint_state(now_s(node), node.model.ik(np.array([0.75, 0.0, 0.13]))))
         assert node.pub_cmd.sent == [] and len(node.pub_state.sent) == 1
         assert node.ctrl.enable() == (False, 'no profile')
         node.destroy_node()
@@ -276,7 +299,7 @@ def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
     ctrl, peer, ex, ns = graph
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
-    timer = feed_joint_states(peer, ns, 20.0, q0)
+    timer = feed_joint_states(peer, ns, q0)
     spin_for(ex, states.expect(lambda m: len(states.msgs) >= 150))     # 0.6 s of samples
     assert {m.mode for m in states.msgs} == {ControllerState.MODE_IDLE}
     Collector(peer, JointState, f'{ns}/torque_command', state_qos())
@@ -285,3 +308,181 @@ def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
     peer.destroy_timer(timer)
     # the stream was steady long before: the ramp starts as soon as the subscriber is matched
     assert first.mode == ControllerState.MODE_RAMP and len(states.msgs) - n_idle < 124
+
+
+# --- issue 14: the node's safety behaviour ---------------------------------------------------
+def _until(ex, cond, timeout=TIMEOUT):
+    """Spin until cond() (checked by a timer on the executor), bounded."""
+    fut = Future()
+    node = ex.get_nodes()[0]
+    timer = node.create_timer(0.005, lambda: fut.done() or (cond() and fut.set_result(True)))
+    ex.spin_until_future_complete(fut, timeout_sec=timeout)
+    node.destroy_timer(timer)
+    assert fut.done(), 'condition not met in time'
+
+
+def _drive(ctrl, q, n, plant=None):
+    """Feed n fresh states (the robot at q, or a plant the commands act on) through the
+    node's hot path; returns the controller states sent."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    ctrl.pub_cmd, ctrl.pub_state = _Capture(), _Capture()
+    out = []
+    for _ in range(n):
+        if plant is not None:
+            y = plant.measure()
+            q, qd = y.q, y.qd
+        else:
+            qd = np.zeros(3)
+        ctrl.on_state_raw(serialize_message(joint_state(now_s(ctrl), list(q), list(qd))))
+        out.append(deserialize_message(ctrl.pub_state.sent[-1], ControllerState))
+        if plant is not None and ctrl.pub_cmd.sent:
+            cmd = deserialize_message(ctrl.pub_cmd.sent[-1], JointState)
+            plant.command(np.array(cmd.effort))
+            plant.step()
+            ctrl.pub_cmd.sent.clear()
+    return out
+
+
+def _plan_msg(start, joint=0, peak=0.3, amp=0.1):
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from irb_control.profiles import sine_trajectory
+    tr = sine_trajectory(np.asarray(start, float), joint, peak, amp)
+    msg = JointTrajectory(joint_names=['joint_1', 'joint_2', 'joint_3'])
+    for k in range(len(tr.t)):
+        p = JointTrajectoryPoint(positions=tr.q[k].tolist(), velocities=tr.qd[k].tolist(),
+                                 accelerations=tr.qdd[k].tolist())
+        p.time_from_start.sec = int(tr.t[k])
+        p.time_from_start.nanosec = int(round((tr.t[k] % 1) * 1e9))
+        msg.points.append(p)
+    return msg
+
+
+@pytest.fixture
+def timed():
+    """A time-driven pdplus with a short built-in sine, auto_enable off, and a peer."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    ns = f'/t{uuid.uuid4().hex[:8]}'
+    ctrl = PdPlusNode(context=ctx, namespace=ns, parameter_overrides=[
+        Parameter('executor', value='single'), Parameter('reference_mode', value='time'),
+        Parameter('builtin_profile', value='sine'), Parameter('sine_amplitude_rad', value=0.05),
+        Parameter('sine_peak_speed_rad_s', value=0.3), Parameter('auto_enable', value=False),
+        Parameter('max_plan_points', value=3000)])
+    peer = rclpy.create_node('peer', namespace=ns, context=ctx)
+    axis_ok(peer, ns)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(peer)
+    ex.add_node(ctrl)
+    yield ctrl, peer, ex, ns
+    ex.shutdown()
+    ctrl.destroy_node()
+    peer.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+
+
+def _publish_plan(peer, ns, msg):
+    from trajectory_msgs.msg import JointTrajectory
+    pub = peer.create_publisher(JointTrajectory, f'{ns}/planned_trajectory', latched_qos())
+    pub.publish(msg)
+    return pub
+
+
+def test_a_plan_arriving_while_holding_does_not_move_the_robot(timed):
+    # issue 14 defect 1: joint-1 torque 28 -> 472 N m and 0.036 rad of motion while HOLD
+    ctrl, peer, ex, ns = timed
+    ctrl.watchdog.timeout_s = 0.5      # the test steps a plant in Python between samples
+    from irb_control.closed_loop import build_default
+    plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
+    start = ctrl.ctrl.start_pose()
+    plant.reset(start)
+    _until(ex, lambda: ctrl.axis is not None)
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode != ControllerState.MODE_HOLD:
+        states = _drive(ctrl, None, 50, plant)
+    hold_ref = np.array(states[-1].q_ref)
+    q_hold = plant.state.q.copy()
+    _publish_plan(peer, ns, _plan_msg(start + np.array([0.3, 0.0, 0.0])))
+    states = []
+    while ctrl.last_plan is None:                        # keep the robot fed meanwhile
+        states += _drive(ctrl, None, 5, plant)
+        ex.spin_once(timeout_sec=0.0)
+    assert ctrl.last_plan['ok'], ctrl.last_plan
+    states += _drive(ctrl, None, 100, plant)             # 0.4 s more with the plan pending
+    assert {s.mode for s in states} == {ControllerState.MODE_HOLD}
+    assert all(np.array_equal(s.q_ref, hold_ref) for s in states)
+    assert np.abs(plant.state.q - q_hold).max() < 2e-3   # held (was 0.036 rad on joint 1)
+    assert max(abs(s.tau_command[0] - states[0].tau_command[0]) for s in states) < 20.0
+
+
+def test_a_plan_never_clears_a_latched_stop_in_the_node(timed):
+    # defect 4
+    ctrl, peer, ex, ns = timed
+    ctrl.watchdog.timeout_s = 0.5      # the test's own pace between samples
+    _until(ex, lambda: ctrl.axis is not None)
+    q0 = ctrl.ctrl.start_pose()
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    _drive(ctrl, q0, 5)
+    ctrl.on_stop(Trigger.Request(), Trigger.Response())
+    _publish_plan(peer, ns, _plan_msg(q0))
+    _until(ex, lambda: ctrl.last_plan is not None)
+    states = _drive(ctrl, q0, 50)
+    assert {s.mode for s in states} == {ControllerState.MODE_STOPPED}
+    assert not ctrl.pub_cmd.sent and states[-1].stop_reason == 'stop service'
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    assert _drive(ctrl, q0, 1)[-1].mode == ControllerState.MODE_RAMP
+
+
+def test_stale_and_future_stamps_are_refused_and_not_counted_as_misses(timed):
+    # defect 5: one NaN state stamped 7 s added 445,285,379,491 to missed_deadlines
+    from rclpy.serialization import serialize_message
+    ctrl, peer, ex, ns = timed
+    q0 = ctrl.ctrl.start_pose()
+    _drive(ctrl, q0, 10)
+    missed, rejected = ctrl.missed, ctrl.rejected_stale
+    ctrl.pub_cmd = _Capture()
+    for stamp in (7.0, now_s(ctrl) - 0.05, now_s(ctrl) + 0.05):
+        ctrl.on_state_raw(serialize_message(joint_state(stamp, [np.nan, 0.0, 0.0])))
+        ctrl.on_state_raw(serialize_message(joint_state(stamp, q0)))
+    assert ctrl.rejected_stale == rejected + 6 and not ctrl.pub_cmd.sent
+    _drive(ctrl, q0, 10)
+    assert ctrl.missed - missed <= 2          # only real gaps (the test's own pauses)
+
+
+@pytest.mark.parametrize('what', ['step', 'chatter', 'acceleration', 'too many points'])
+def test_plans_are_checked_for_what_the_controller_will_demand(timed, what):
+    # defect 9: accelerations of 1e5, +-0.04 rad chatter with zero velocity, a 1 rad step and
+    # 200k points were accepted
+    ctrl, peer, ex, ns = timed
+    q0 = ctrl.ctrl.start_pose()
+    builtin = ctrl.ctrl.pending
+    msg = _plan_msg(q0)
+    pts = msg.points
+    if what == 'step':
+        pts[100].positions = [pts[100].positions[0] + 1.0] + list(pts[100].positions[1:])
+    elif what == 'chatter':
+        for k, p in enumerate(pts):
+            p.positions = [p.positions[0], p.positions[1], p.positions[2] + 0.04 * (-1) ** k]
+    elif what == 'acceleration':
+        pts[50].accelerations = [1e5, 0.0, 0.0]
+    else:
+        while len(msg.points) <= 3000:
+            msg.points += msg.points[:1000]
+    _publish_plan(peer, ns, msg)
+    _until(ex, lambda: ctrl.last_plan is not None)
+    assert not ctrl.last_plan['ok']
+    reason = ctrl.last_plan['reason']
+    expected = {'step': 'inconsistent', 'chatter': 'inconsistent',
+                'acceleration': 'acceleration', 'too many points': 'max_plan_points'}[what]
+    assert expected in reason, reason
+    assert ctrl.ctrl.pending is builtin           # nothing of the refused plan was taken
+
+
+def test_enable_is_refused_while_the_drives_report_an_error(timed):
+    # defect 8: pdplus never saw the axis status; it must not ramp against a latched error
+    ctrl, peer, ex, ns = timed
+    axis_ok(peer, ns, error=1)
+    _until(ex, lambda: ctrl.axis is not None and ctrl.axis.error)
+    resp = ctrl.on_enable(Trigger.Request(), Trigger.Response())
+    assert not resp.success and 'reset it first' in resp.message

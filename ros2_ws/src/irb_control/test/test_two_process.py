@@ -3,6 +3,7 @@ thesis circle; this test only listens (controller state and camera)."""
 import os
 import signal
 import subprocess
+import time
 import uuid
 
 import numpy as np
@@ -15,6 +16,7 @@ from irb_description.path import thesis_circle  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 from rclpy.task import Future  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 
 from irb_control.closed_loop import circle_distance  # noqa: E402
 from irb_description.node_main import state_qos  # noqa: E402
@@ -23,10 +25,10 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def _stop(proc):
-    """SIGINT to `ros2 run` (it forwards it to the node), SIGKILL to the whole session (both)
-    after 20 s."""
+    """Ctrl-C as a terminal sends it (SIGINT to the session's group: `ros2 run` and the node,
+    once each), SIGKILL to the group after 20 s."""
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:
@@ -106,3 +108,72 @@ def test_robot_follows_circle_across_processes(processes):
         _stop(sim)
     assert sim.wait(timeout=20) == 0, sim.stdout.read()
     assert ctrl.wait(timeout=20) == 0, ctrl.stdout.read()
+
+
+def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state():
+    """pdplus frozen for 1 s (SIGSTOP) in the middle of the path, then resumed: it must end
+    in a latched stop (its own stall or the watchdog) and never answer the states that waited
+    in its queue (issue 14, defect 3: it resumed silently in 5 of 7 runs, answering old
+    states). Real time: simulator and pdplus on the steady clock."""
+    from std_srvs.srv import Trigger
+    ns = f'/st{uuid.uuid4().hex[:8]}'
+    common = ['--ros-args', '-r', f'__ns:={ns}']
+    sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           start_new_session=True)
+    ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=false'],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    node = rclpy.create_node(f'stall_{uuid.uuid4().hex[:6]}', context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        states, ages = [], []
+        node.create_subscription(ControllerState, f'{ns}/controller_state', states.append,
+                                 state_qos())
+
+        def on_cmd(m):      # age of the state a command answers, on arrival here
+            ages.append((time.monotonic(), node.get_clock().now().nanoseconds * 1e-9
+                         - (m.header.stamp.sec + m.header.stamp.nanosec * 1e-9)))
+        node.create_subscription(JointState, f'{ns}/torque_command', on_cmd, state_qos())
+        enable = node.create_client(Trigger, f'{ns}/pdplus/enable')
+        assert enable.wait_for_service(timeout_sec=60.0), 'pdplus did not come up'
+
+        def until(cond, timeout):
+            deadline = time.monotonic() + timeout
+            while not cond() and time.monotonic() < deadline:
+                ex.spin_once(timeout_sec=0.02)
+            return cond()
+        assert until(lambda: bool(states), 60), 'no controller state'
+        fut = enable.call_async(Trigger.Request())
+        assert until(fut.done, 30) and fut.result().success, fut.result()
+        assert until(lambda: states[-1].mode == ControllerState.MODE_PATH, 30), \
+            [s.mode for s in states[-5:]]
+        os.killpg(ctrl.pid, signal.SIGSTOP)
+        t_stop = time.monotonic()
+        try:
+            ctrl.wait(timeout=1.0)            # frozen: it does not end
+        except subprocess.TimeoutExpired:
+            pass
+        os.killpg(ctrl.pid, signal.SIGCONT)
+        t_cont = time.monotonic()
+        assert until(lambda: states[-1].mode == ControllerState.MODE_STOPPED, 30), \
+            'pdplus did not latch a stop after its stall'
+        assert until(lambda: False, 0.5) is False       # keep listening half a second
+        reason = [s.stop_reason for s in states if s.mode == ControllerState.MODE_STOPPED][0]
+        assert 'stall' in reason or 'watchdog' in reason, reason
+        assert states[-1].mode == ControllerState.MODE_STOPPED            # latched
+        # commands pdplus computed after the stall (arriving more than 50 ms after SIGCONT:
+        # one published just before the freeze may still be delivered right after it) answer
+        # no state older than the watchdog limit (3.5 periods) plus the way here
+        late = [age for t, age in ages if t > t_cont + 0.05]
+        assert t_cont - t_stop >= 1.0
+        assert not late or max(late) < 0.05, max(late)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        _stop(ctrl)
+        _stop(sim)

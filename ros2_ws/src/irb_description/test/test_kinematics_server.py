@@ -24,8 +24,8 @@ def server():
          '-r', f'solve_ik:={name}', '-r', f'__node:=kin_{uuid.uuid4().hex[:6]}'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     yield name, proc
-    if proc.poll() is None:     # ros2 run forwards SIGINT; SIGKILL goes to both
-        proc.send_signal(signal.SIGINT)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
         try:
             proc.wait(timeout=20)
         except subprocess.TimeoutExpired:
@@ -74,5 +74,5 @@ def test_solve_ik_across_processes(server, client_node, model):
     assert list(res.reachable) == [False, True]
     assert np.all(np.isnan(res.solutions[0].positions))
 
-    proc.send_signal(signal.SIGINT)
+    os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
     assert proc.wait(timeout=30) == 0, proc.stdout.read()

@@ -185,13 +185,18 @@ def metadata_dict(files: list[FileStats], topics: list[TopicInfo], counts: dict[
 
 
 def write_metadata(bag: Path, meta: dict) -> None:
-    """Write ``metadata.yaml`` atomically (tmp file, fsync, rename)."""
+    """Write ``metadata.yaml`` atomically (tmp file, fsync, rename); on failure (a full disk)
+    the old file stays and no tmp file is left."""
     tmp = bag / 'metadata.yaml.tmp'
-    with open(tmp, 'w') as f:
-        yaml.safe_dump(meta, f, sort_keys=False)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, bag / 'metadata.yaml')
+    try:
+        with open(tmp, 'w') as f:
+            yaml.safe_dump(meta, f, sort_keys=False)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, bag / 'metadata.yaml')
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 # --- writer -----------------------------------------------------------------------------------
@@ -245,13 +250,20 @@ class _Split:
         return self.stats
 
 
+class BagWriteError(BagError):
+    """Writing the bag failed (typically a full disk); the message names the bag, what is kept
+    and why. The writer is then ``failed``: further writes are refused, ``close`` keeps the
+    closed splits listed and leaves the open one for ``recover_bag``."""
+
+
 class BagWriter:
     """Crash-safe rosbag2 MCAP writer that splits every ``split_period_s`` of wall time.
 
     ``write(topic, t_ns, data)`` takes raw CDR bytes and a log time [ns]. Call ``maybe_split``
     periodically (the recorder does, from a timer) so that a quiet bag still closes its split;
     ``write`` calls it too. ``close`` finishes the last split. Never overwrites: the bag
-    directory must not exist (``BagExistsError``).
+    directory must not exist (``BagExistsError``). An OSError while writing (a full disk)
+    becomes one ``BagWriteError``; see there.
     """
 
     def __init__(self, path: str | Path, split_period_s: float = 2.0,
@@ -282,6 +294,7 @@ class BagWriter:
         self._split: _Split | None = None
         self._index = 0
         self._closed = False
+        self.failed = ''               # why writing stopped ('' = it did not)
         write_metadata(self.path, self._metadata())
 
     @property
@@ -301,36 +314,72 @@ class BagWriter:
         """Append one serialized message with log time ``t_ns`` [ns]."""
         if self._closed:
             raise BagError(f'bag {self.path} is closed')
+        if self.failed:
+            raise BagWriteError(self.failed)
         if topic not in self.topics:
             raise BagError(f'topic {topic} not registered')
-        self.maybe_split()
-        if self._split is None:
-            self._split = _Split(self.path / f'{self.path.name}_{self._index}.mcap',
-                                 list(self.topics.values()), self.chunk_size, self.compression,
-                                 self.clock())
-            self._index += 1
-        self._split.write(topic, int(t_ns), data)
+        with self._guard():
+            self.maybe_split()
+            if self._split is None:
+                self._split = _Split(self.path / f'{self.path.name}_{self._index}.mcap',
+                                     list(self.topics.values()), self.chunk_size,
+                                     self.compression, self.clock())
+                self._index += 1
+            self._split.write(topic, int(t_ns), data)
         self.counts[topic] += 1
         self.bytes_written += len(data)
+
+    def _guard(self):
+        """OSError (e.g. ENOSPC) -> BagWriteError once, the writer marked failed."""
+        writer = self
+
+        class _Guard:
+            def __enter__(self):
+                return self
+
+            def __exit__(self, typ, exc, tb):
+                if typ is not None and issubclass(typ, OSError) and not writer.failed:
+                    kept = sum(f.count for f in writer.files)
+                    writer.failed = (f'bag {writer.path}: writing failed '
+                                     f'({exc.strerror or exc}); {len(writer.files)} closed '
+                                     f'split(s) with {kept} messages are kept, the open split '
+                                     'is left for recovery (the next recorder start in this '
+                                     'root salvages it)')
+                    raise BagWriteError(writer.failed) from None
+                return False
+        return _Guard()
 
     def maybe_split(self) -> bool:
         """Close the open split if it is older than ``split_period_s``; True if it did."""
         if self._split is None or self.clock() - self._split.opened_at < self.split_period_s:
             return False
-        self._close_split()
+        with self._guard():
+            self._close_split()
         return True
 
     def flush(self) -> None:
         """Write the open chunk to disk (``recover_bag`` can salvage flushed chunks)."""
-        if self._split is not None:
-            self._split.flush()
+        if self._split is not None and not self.failed:
+            with self._guard():
+                self._split.flush()
 
     def close(self) -> None:
-        """Close the last split and write the final metadata.yaml."""
+        """Close the last split and write the final metadata.yaml. After a failure the open
+        split is left as ``.active`` for ``recover_bag`` (never an exception here)."""
         if self._closed:
             return
+        if self._split is not None and not self.failed:
+            try:
+                with self._guard():
+                    self._close_split()
+            except BagWriteError:
+                pass
         if self._split is not None:
-            self._close_split()
+            try:
+                self._split.stream.close()
+            except OSError:
+                pass
+            self._split = None
         self._closed = True
         (self.path / LOCK_NAME).unlink(missing_ok=True)
         self._lock.close()
@@ -417,6 +466,8 @@ def recover_bag(path: str | Path) -> RecoveryReport:
         raise BagError(f'bag {bag} is being recorded right now; not recovering it')
     report = RecoveryReport()
     (bag / LOCK_NAME).unlink(missing_ok=True)
+    for tmp in bag.glob('*.tmp'):            # half-written by an earlier failed attempt
+        tmp.unlink()
     for active in sorted(bag.glob(f'*.mcap{ACTIVE_SUFFIX}')):
         schemas, channels, messages, problem = _salvage(active)
         if problem:
@@ -424,23 +475,14 @@ def recover_bag(path: str | Path) -> RecoveryReport:
         final = active.with_name(active.name[:-len(ACTIVE_SUFFIX)])
         if messages and channels:
             tmp = final.with_name(final.name + '.tmp')
-            with open(tmp, 'wb') as f:
-                w = McapWriter(f, compression=CompressionType.NONE, enable_data_crcs=True)
-                w.start(profile='ros2', library='irb_identification recover')
-                for s in schemas:
-                    w.register_schema(s.name, s.encoding, s.data)
-                ids = {}
-                by_schema = {s.id: i for i, s in enumerate(schemas, start=1)}
-                for c in channels:
-                    ids[c.id] = w.register_channel(c.topic, c.message_encoding,
-                                                   by_schema.get(c.schema_id, 0), c.metadata)
-                for m in messages:
-                    if m.channel_id in ids:
-                        w.add_message(ids[m.channel_id], m.log_time, m.data, m.publish_time,
-                                      m.sequence)
-                w.finish()
-                f.flush()
-                os.fsync(f.fileno())
+            try:
+                _write_salvaged(tmp, schemas, channels, messages)
+            except OSError as exc:
+                tmp.unlink(missing_ok=True)
+                report.problems.append(f'{active.name}: not recovered, writing failed '
+                                       f'({exc.strerror or exc}); left as it is for a later '
+                                       'attempt')
+                continue
             os.replace(tmp, final)
             report.salvaged_files.append(final.name)
             report.salvaged_messages += len(messages)
@@ -467,9 +509,34 @@ def recover_bag(path: str | Path) -> RecoveryReport:
                 topics.setdefault(t.name, t)
             for k, v in cnt.items():
                 counts[k] = counts.get(k, 0) + v
-        write_metadata(bag, metadata_dict(files, list(topics.values()), counts))
+        try:
+            write_metadata(bag, metadata_dict(files, list(topics.values()), counts))
+        except OSError as exc:
+            report.problems.append(f'metadata.yaml not rebuilt ({exc.strerror or exc})')
+            return report
         report.metadata_rebuilt = True
     return report
+
+
+def _write_salvaged(tmp: Path, schemas, channels, messages) -> None:
+    """The salvaged records as a closed, CRC-checked MCAP file ``tmp``."""
+    with open(tmp, 'wb') as f:
+        w = McapWriter(f, compression=CompressionType.NONE, enable_data_crcs=True)
+        w.start(profile='ros2', library='irb_identification recover')
+        for s in schemas:
+            w.register_schema(s.name, s.encoding, s.data)
+        ids = {}
+        by_schema = {s.id: i for i, s in enumerate(schemas, start=1)}
+        for c in channels:
+            ids[c.id] = w.register_channel(c.topic, c.message_encoding,
+                                           by_schema.get(c.schema_id, 0), c.metadata)
+        for m in messages:
+            if m.channel_id in ids:
+                w.add_message(ids[m.channel_id], m.log_time, m.data, m.publish_time,
+                              m.sequence)
+        w.finish()
+        f.flush()
+        os.fsync(f.fileno())
 
 
 def _split_index(p: Path) -> tuple[int, str]:
@@ -517,8 +584,9 @@ def _open_reader(path: Path):
     if not path.exists():
         raise BagError(f'bag {path} does not exist')
     if path.is_dir() and not (path / 'metadata.yaml').is_file():
-        hint = (' (left by a killed recorder: run recover_bag / `recorder --ros-args -p '
-                'recover:=true`)' if needs_recovery(path) else '')
+        hint = (' (left by a killed recorder: start a recorder with this root and '
+                'recover_on_start:=true, its default, or call irb_identification.bagio.'
+                'recover_bag)' if needs_recovery(path) else '')
         raise BagError(f'bag {path}: no metadata.yaml{hint}')
     try:
         reader = Reader(path)
@@ -573,6 +641,31 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
         return out
     finally:
         reader.close()
+
+
+def verify_bag(path: str | Path) -> int:
+    """Read every split file of a bag with CRC validation (chunks and data sections, the
+    mcap library's own reader); the number of messages, or BagError naming the file and the
+    damage. rosbags' reader does not check CRCs: a bag with a damaged chunk played as if
+    nothing were wrong."""
+    bag = Path(path)
+    try:
+        info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        files = list(info['relative_file_paths'])
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise BagError(f'bag {bag}: unreadable metadata.yaml ({type(exc).__name__})') from None
+    count = 0
+    for rel in files:
+        try:
+            with open(bag / rel, 'rb') as f:
+                for rec in StreamReader(f, emit_chunks=True, validate_crcs=True).records:
+                    for r in (breakup_chunk(rec, validate_crc=True) if isinstance(rec, Chunk)
+                              else [rec]):
+                        count += isinstance(r, Message)
+        except (McapError, ValueError, EOFError, OSError, struct.error) as exc:
+            raise BagError(f'bag {bag}: {rel} is damaged ({type(exc).__name__}: {exc})') \
+                from None
+    return count
 
 
 def iter_messages(path: str | Path) -> Iterator[tuple[str, str, int, bytes]]:

@@ -27,6 +27,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from .offline_sim import PERIOD_S, SimConfig, simulate, start_pose, write_run_bag
@@ -105,6 +106,10 @@ class ExperimentsNode(Node):
         self.js_topic = param('joint_states_topic', '/joint_states',
                               'ros mode: JointState topic (the recorded margin is checked on '
                               'its stamps)')
+        self.plan_status_topic = param('plan_status_topic', '/pdplus/plan_status',
+                                       "ros mode: pdplus's verdict on each plan (latched)")
+        self.enable_service = param('enable_service', '/pdplus/enable',
+                                    'ros mode: the service that starts the accepted plan')
         self.start_timeout = param('start_timeout_s', 5.0,
                                    '[s] ros mode: simulated time after publishing within which '
                                    'pdplus must start the run')
@@ -153,6 +158,13 @@ class ExperimentsNode(Node):
         pub = self.create_publisher(JointTrajectory, self.topic, QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        from irb_interfaces.msg import PlanStatus
+        self._plan_status = [None]
+        self.create_subscription(PlanStatus, self.plan_status_topic,
+                                 lambda m: self._plan_status.__setitem__(0, m), QoSProfile(
+                                     depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                     durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._enable = self.create_client(Trigger, self.enable_service)
         self._wait_controller_idle(executor)
         bags, failed = [], []
         for j, prof, q0, name in self.runs():
@@ -201,6 +213,22 @@ class ExperimentsNode(Node):
                 'pdplus was running another motion ('
                 + ' -> '.join(MODE_NAMES.get(m, str(m)) for m in seen) + '): waited for it')
 
+    def _enable_when_accepted(self, executor, stamp, deadline: float, name: str) -> None:
+        """pdplus checks every plan and keeps it pending until enable: wait for its verdict on
+        this plan (its stamp), then call enable; RunError if it refuses either."""
+        verdict = self._plan_status
+        self._spin_until(executor, lambda: (verdict[0] is not None
+                                            and verdict[0].plan_stamp == stamp), deadline,
+                         f'{name}: pdplus verdict on the plan ({self.plan_status_topic})')
+        if not verdict[0].accepted:
+            raise RunError(f'{name}: pdplus refused the plan: {verdict[0].reason}')
+        self._spin_until(executor, self._enable.service_is_ready, deadline,
+                         f'{name}: {self.enable_service} available')
+        fut = self._enable.call_async(Trigger.Request())
+        self._spin_until(executor, fut.done, deadline, f'{name}: {self.enable_service} answer')
+        if not fut.result().success:
+            raise RunError(f'{name}: pdplus refused to enable: {fut.result().message}')
+
     def _run_one(self, executor, pub, j, prof, q0, name) -> Path:
         """One run: recorder up and receiving, pdplus not moving -> publish -> RAMP/TIME ->
         HOLD -> ``run_margin_s`` of simulated time recorded -> bag closed."""
@@ -234,7 +262,9 @@ class ExperimentsNode(Node):
                                                 and not mon.is_moving),
                              deadline, f'{name}: recorder receiving, pdplus not moving')
             mon.start(mon.t_state)
+            traj.header.stamp = self.get_clock().now().to_msg()
             pub.publish(traj)
+            self._enable_when_accepted(executor, traj.header.stamp, deadline, name)
             self._spin_until(executor, lambda: mon.finished, deadline,
                              f'{name}: run (phase {mon.phase})')
         finally:

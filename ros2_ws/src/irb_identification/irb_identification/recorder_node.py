@@ -10,12 +10,13 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
-from irb_description.node_main import spin_until_signal
+from irb_description.node_main import (build_node, ignore_stop_signals, install_stop_signals,
+                                       spin_until_signal)
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from .bagio import BagExistsError, BagWriter, TopicInfo, needs_recovery, recover_bag
+from .bagio import BagError, BagWriteError, BagWriter, TopicInfo, needs_recovery, recover_bag
 from .rosutil import default_bag_root, message_class, qos_to_dict, subscription_qos
 
 DEFAULT_TOPICS = ['/joint_states', '/torque_command', '/controller_state', '/camera/tcp']
@@ -70,7 +71,11 @@ class RecorderNode(Node):
     def _recover_leftovers(self) -> None:
         for bag in sorted(p for p in self.root.iterdir() if p.is_dir()):
             if list(bag.glob('*.mcap*')) and needs_recovery(bag):
-                rep = recover_bag(bag)
+                try:
+                    rep = recover_bag(bag)
+                except (BagError, OSError) as exc:
+                    self.get_logger().error(f'not recovered: {bag}: {exc}')
+                    continue
                 self.get_logger().warn(
                     f'recovered {bag}: {rep.salvaged_messages} messages salvaged from '
                     f'{rep.salvaged_files}; {"; ".join(rep.problems) or "no problems"}')
@@ -98,7 +103,7 @@ class RecorderNode(Node):
             self.get_logger().info(f'subscribed to {topic} [{msgtype}]')
 
     def _callback(self, topic: str):
-        write = self.writer.write
+        write = self._write
         clock = self.get_clock()
         tap = self.taps.get(topic)
 
@@ -110,9 +115,30 @@ class RecorderNode(Node):
             tap(data)
         return cb if tap is None else cb_tap
 
+    def _write(self, topic: str, t_ns: int, data: bytes) -> None:
+        if self.writer.failed:
+            return
+        try:
+            self.writer.write(topic, t_ns, data)
+        except BagWriteError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc) -> None:
+        """Writing failed (a full disk): one line, stop recording (main ends with exit 1)."""
+        self.get_logger().error(f'recording stopped: {exc}')
+
+    @property
+    def failed(self) -> str:
+        return self.writer.failed
+
     def _housekeeping(self) -> None:
-        if not self.writer.maybe_split():
-            self.writer.flush()
+        if self.writer.failed:
+            return
+        try:
+            if not self.writer.maybe_split():
+                self.writer.flush()
+        except BagWriteError as exc:
+            self._fail(exc)
 
     def _progress(self) -> None:
         now = time.monotonic()
@@ -129,7 +155,8 @@ class RecorderNode(Node):
     def close(self) -> None:
         self.writer.close()
         text = (f'closed {self.bag_path}: {self.writer.message_count} messages in '
-                f'{len(self.writer.files)} files')
+                f'{len(self.writer.files)} files'
+                + (' (writing had failed: see above)' if self.writer.failed else ''))
         if self.context.ok():
             self.get_logger().info(text)
         else:                              # after Ctrl-C the rosout publisher is gone
@@ -137,26 +164,45 @@ class RecorderNode(Node):
 
 
 def main(args=None):
+    """Exit 0 after Ctrl-C (bag closed); 1 with one line when the bag cannot be created or
+    writing fails (a full disk: the closed splits are kept)."""
+    install_stop_signals()
     rclpy.init(args=args)
     try:
-        node = RecorderNode()
-    except BagExistsError as exc:
-        print(f'recorder: {exc}', file=sys.stderr)
+        node, interrupted = build_node(RecorderNode)
+    except (BagError, OSError) as exc:
+        text = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        print(f'recorder: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
+    except (KeyboardInterrupt, ExternalShutdownException):   # before the bag existed
+        ignore_stop_signals()
+        rclpy.try_shutdown()
+        return 0
+    executor = None
     try:
+        if interrupted:
+            raise KeyboardInterrupt
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
         # the signal ends the loop between callbacks: a KeyboardInterrupt inside a write
         # callback would leave a half-written record in the file that close() then finishes
-        spin_until_signal(executor)
+        spin_until_signal(executor, until=lambda: bool(node.failed))
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - rclpy errors after Ctrl-C shut the context down
+        if node.context.ok():
+            raise
     finally:
-        executor.shutdown()
+        ignore_stop_signals()        # a second Ctrl-C must not cut the closing of the bag
+        if executor is not None:
+            executor.shutdown()
         node.close()
         node.destroy_node()
         rclpy.try_shutdown()
+    if node.failed:
+        print(f'recorder: {node.failed}', file=sys.stderr)
+        return 1
     return 0
 
 

@@ -9,11 +9,12 @@ import threading
 import time
 
 import rclpy
+from irb_description.node_main import build_node, ignore_stop_signals, install_stop_signals
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
-from .bagio import BagError, bag_topics, iter_messages, topic_qos
+from .bagio import BagError, bag_topics, iter_messages, topic_qos, verify_bag
 from .playback import play
 from .rosutil import message_class, qos_from_dicts
 
@@ -37,6 +38,8 @@ class ReplayNode(Node):
                                    'wait until every topic has this many subscribers'))
         self.wait_timeout = float(param('wait_timeout_s', 10.0, '[s] limit of that wait'))
         self.start_delay = float(param('start_delay_s', 0.2, '[s] pause before playing'))
+        self.verify = bool(param('verify', True, 'read the whole bag with CRC checks before '
+                                 'playing it (a damaged bag is refused, not half played)'))
         if not self.bag:
             raise BagError('parameter bag is required (a bag directory)')
         types = bag_topics(self.bag)
@@ -54,6 +57,7 @@ class ReplayNode(Node):
         self.stop = threading.Event()
         self.done = threading.Event()
         self.stats = None
+        self.error = ''              # why playing failed ('' = it did not)
 
     def _wait_for_subscribers(self) -> None:
         deadline = time.monotonic() + self.wait_timeout
@@ -69,46 +73,68 @@ class ReplayNode(Node):
         self.clock_pub.publish(msg)
 
     def run(self) -> None:
-        """Play the bag once; sets ``done``."""
+        """Play the bag once; sets ``done``. A damaged bag ends it with ``error``; a stop
+        (Ctrl-C) ends it quietly."""
         try:
-            self._wait_for_subscribers()
-            self.stop.wait(self.start_delay)
-            msgs = (m for m in iter_messages(self.bag) if m[0] in self.pubs)
-            self.get_logger().info(f'playing {self.bag} at rate {self.rate or "max"}')
-            self.stats = play(
-                msgs, lambda topic, data: self.pubs[topic].publish(data), self.rate,
-                clock=self._publish_clock if self.clock_pub else None,
-                clock_period_ns=int(1e9 / self.clock_hz), stop=self.stop)
-            self.get_logger().info(
-                f'played {self.stats.messages} messages, {self.stats.bag_span_s:.2f} s of '
-                f'bag in {self.stats.wall_s:.2f} s')
+            self._play()
+        except BagError as exc:
+            self.error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - the thread must report, not print a trace
+            if not self.stop.is_set() and rclpy.ok(context=self.context):
+                self.error = f'playing failed: {type(exc).__name__}: {exc}'
         finally:
             self.done.set()
 
+    def _play(self) -> None:
+        if self.verify:
+            n = verify_bag(self.bag)
+            self.get_logger().info(f'{self.bag}: {n} messages, CRCs valid')
+        self._wait_for_subscribers()
+        self.stop.wait(self.start_delay)
+        msgs = (m for m in iter_messages(self.bag) if m[0] in self.pubs)
+        self.get_logger().info(f'playing {self.bag} at rate {self.rate or "max"}')
+        self.stats = play(
+            msgs, lambda topic, data: self.pubs[topic].publish(data), self.rate,
+            clock=self._publish_clock if self.clock_pub else None,
+            clock_period_ns=int(1e9 / self.clock_hz), stop=self.stop)
+        self.get_logger().info(
+            f'played {self.stats.messages} messages, {self.stats.bag_span_s:.2f} s of '
+            f'bag in {self.stats.wall_s:.2f} s')
+
 
 def main(args=None):
+    """Exit 0 when the bag was played (or Ctrl-C), 1 with one line on a bad or damaged bag."""
+    install_stop_signals()
     rclpy.init(args=args)
     try:
-        node = ReplayNode()
+        node, interrupted = build_node(ReplayNode)
     except BagError as exc:
         print(f'replay: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):   # Ctrl-C while opening the bag
+        ignore_stop_signals()
         rclpy.try_shutdown()
         return 0
     player = threading.Thread(target=node.run, daemon=True)
-    player.start()
+    if not interrupted:
+        player.start()
     try:
-        while rclpy.ok() and not node.done.is_set():
+        while not interrupted and rclpy.ok() and not node.done.is_set():
             rclpy.spin_once(node, timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        ignore_stop_signals()
         node.stop.set()
-        player.join(timeout=5.0)
+        if player.is_alive():
+            player.join(timeout=5.0)
+        error = node.error
         node.destroy_node()
         rclpy.try_shutdown()
+    if error:
+        print(f'replay: {error}', file=sys.stderr)
+        return 1
     return 0
 
 

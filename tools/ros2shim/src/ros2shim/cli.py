@@ -95,10 +95,13 @@ def get_executable_paths(package_name):
 
 
 def run_executable(cmd):
-    """Run ``cmd`` as a child process, forwarding SIGINT and SIGTERM to it.
+    """Run ``cmd`` as a child process and wait for it, as ros2run does.
 
-    Return the child's return code, which is -N if it was killed by signal N (ros2run
-    returns it unchanged, so the shell sees 256 - N).
+    SIGINT is *not* forwarded: a terminal's Ctrl-C reaches the whole foreground process group,
+    the child included, and ros2run only keeps waiting for the child to finish (forwarding it
+    made the node get a second SIGINT during its clean-up). SIGTERM, which a terminal does not
+    send to the group, is forwarded. Return the child's return code, which is -N if it was
+    killed by signal N (ros2run returns it unchanged, so the shell sees 256 - N).
     """
     child, pending, previous = [], [], {}
 
@@ -108,10 +111,14 @@ def run_executable(cmd):
         else:
             pending.append(signum)
 
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    def keep_waiting(_signum, _frame):
+        pass              # the child got the same Ctrl-C from the terminal
+
+    handlers = {signal.SIGINT: keep_waiting, signal.SIGTERM: forward}
+    for signum, handler in handlers.items():
         try:
             if signal.getsignal(signum) is not signal.SIG_IGN:
-                previous[signum] = signal.signal(signum, forward)
+                previous[signum] = signal.signal(signum, handler)
         except ValueError:  # not in the main thread: leave signal handling alone
             break
     try:

@@ -1,0 +1,101 @@
+"""One Ctrl-C stops every node of this package cleanly; a second one is harmless (issue 14,
+defect 11: fake_axis_computer printed a traceback, exited 254 and wrote no statistics; the
+simulator silently skipped its statistics file).
+
+Each executable is started with `ros2 run` in a session of its own and interrupted the way a
+terminal does it: SIGINT to the whole process group (`ros2 run` and the node, once each).
+"""
+import json
+import os
+import select
+import signal
+import socket
+import subprocess
+import time
+import uuid
+
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def free_udp_ports(n):
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    for s in socks:
+        s.bind(('127.0.0.1', 0))
+    ports = [s.getsockname()[1] for s in socks]
+    for s in socks:
+        s.close()
+    return ports
+
+
+def start(exe, *params):
+    cmd = ['ros2', 'run', 'irb_control', exe, '--ros-args', '-r',
+           f'__ns:=/sd{uuid.uuid4().hex[:8]}', *[x for p in params for x in ('-p', p)]]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+
+
+def wait_for_line(proc, needle, timeout=60.0):
+    """Read the output until a line contains ``needle`` (bounded); the lines read so far."""
+    lines, deadline = [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([proc.stdout], [], [], deadline - time.monotonic())
+        if not ready:
+            break
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if needle in line:
+            return lines
+    raise AssertionError(f'no line with {needle!r} within {timeout} s: {"".join(lines)}')
+
+
+def interrupt(proc, times):
+    """``times`` Ctrl-C, the second 50 ms after the first (during the clean-up); exit code and
+    the rest of the output."""
+    os.killpg(proc.pid, signal.SIGINT)
+    if times > 1:
+        try:
+            proc.wait(timeout=0.05)
+        except subprocess.TimeoutExpired:
+            try:
+                os.killpg(proc.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+    try:
+        code = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise AssertionError('did not stop within 30 s of Ctrl-C')
+    return code, proc.stdout.read()
+
+
+@pytest.mark.parametrize('times', [1, 2])
+@pytest.mark.parametrize('exe, ready', [('simulator', 'simulator:'),
+                                        ('fake_axis_computer', 'fake axis computer:'),
+                                        ('pdplus', 'pdplus:'),
+                                        ('axis_bridge', 'axis_bridge:')])
+def test_ctrl_c_stops_cleanly(tmp_path, exe, ready, times):
+    stats = tmp_path / 'stats.json'
+    params = []
+    if exe in ('simulator', 'fake_axis_computer'):
+        params.append(f'stats_path:={stats}')
+    if exe in ('fake_axis_computer', 'axis_bridge'):
+        state, command = free_udp_ports(2)
+        params += [f'state_port:={state}', f'command_port:={command}']
+    proc = start(exe, *params)
+    try:
+        before = ''.join(wait_for_line(proc, ready))
+        code, after = interrupt(proc, times)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    out = before + after
+    assert code == 0, out
+    assert 'Traceback' not in out and 'Error' not in out.replace('error bits', ''), out
+    if exe in ('simulator', 'fake_axis_computer'):
+        assert stats.exists(), out
+        assert json.loads(stats.read_text())           # the statistics were written
