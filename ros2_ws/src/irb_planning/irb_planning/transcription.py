@@ -302,6 +302,19 @@ class Transcription:
                 sol = self._solver_cold(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
                 stats = self._solver_cold.stats()
                 iters += stats['iter_count']
+            if not stats['success']:
+                # IPOPT's monotone barrier update can stall on the flat, nearly degenerate
+                # problems of long durations (b pressed onto delta^2 almost everywhere; seen:
+                # 'Infeasible_Problem_Detected' at 59 s between solved 58 and 59.5 s); the
+                # adaptive update solves them. Built for the retry only, then released.
+                fallback = ca.nlpsol('transcription_adaptive', 'ipopt', self._nlp,
+                                     ipopt_options(self._max_iter, self._tol,
+                                                   extra={'mu_strategy': 'adaptive'}))
+                x0 = self.initial_guess(req, lbx, ubx)
+                sol = fallback(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+                stats = fallback.stats()
+                iters += stats['iter_count']
+                del fallback
             elapsed = time.perf_counter() - t0
             x = np.asarray(sol['x']).ravel()
             ok = bool(stats['success'])
@@ -316,10 +329,11 @@ class Transcription:
         peak = np.maximum(np.abs(tau_n).reshape(-1, self.n).max(axis=0),
                           np.abs(tau_m).reshape(-1, self.n).max(axis=0))
         stats_out = SolveStats(str(stats['return_status']), ok, int(iters), elapsed)
-        try:
-            profile = ThetaProfile(self.nodes.theta, np.sqrt(b), a)
-        except ValueError as exc:
-            profile = None
-            stats_out = SolveStats(f'invalid profile: {exc}', False, int(iters), elapsed)
+        profile = None
+        if ok:                  # a failed solve keeps IPOPT's own status as the reason
+            try:
+                profile = ThetaProfile(self.nodes.theta, np.sqrt(b), a)
+            except ValueError as exc:
+                stats_out = SolveStats(f'invalid profile: {exc}', False, int(iters), elapsed)
         return TranscriptionResult(profile, float(energy[0]), float(duration[0]), peak,
                                    stats_out)
