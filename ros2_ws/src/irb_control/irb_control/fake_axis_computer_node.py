@@ -16,9 +16,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, run_node
+from irb_description.node_main import declare, run_node, running
 from rclpy.node import Node
 
 from .fake_axis_core import FAULT_KINDS, FakeAxisCore, FaultConfig
@@ -79,7 +78,7 @@ class FakeAxisComputer(Node):
         k = 0
         outbox: list[tuple[float, int, bytes]] = []   # (send time, tie-break, datagram)
         n = 0
-        while rclpy.ok():
+        while running():
             t_cycle = t0 + k * self.period
             if self.duration > 0 and t_cycle - t0 >= self.duration:
                 break

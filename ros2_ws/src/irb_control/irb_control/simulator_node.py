@@ -11,11 +11,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, running, state_qos
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -238,13 +237,13 @@ class SimulatorNode(Node):
         """Loop until shutdown."""
         T = self.config.period_s
         if self.lockstep:
-            while rclpy.ok(context=self.context):
+            while running(self.context):
                 t = self.plant.state.t
                 stamp = _stamp(t)
                 self.pub_clock.publish(Clock(clock=stamp))
                 self._publish_state(stamp)
                 deadline = time.monotonic() + self.p['lockstep_wait_s']
-                while self._answered_k != self._k and rclpy.ok(context=self.context):
+                while self._answered_k != self._k and running(self.context):
                     left = deadline - time.monotonic()
                     if left <= 0:
                         break
@@ -256,7 +255,7 @@ class SimulatorNode(Node):
             return
         t0_ros = self.get_clock().now().nanoseconds * 1e-9
         next_tick = time.monotonic()
-        while rclpy.ok(context=self.context):
+        while running(self.context):
             now = time.monotonic()
             if now < next_tick:
                 executor.spin_once(timeout_sec=next_tick - now)

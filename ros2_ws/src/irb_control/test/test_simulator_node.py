@@ -50,11 +50,23 @@ def test_state_bytes_and_commands_by_name(sim):
     cmd.header.stamp = stamp
     sim.on_command_raw(serialize_message(cmd))
     assert applied[-1] == [1.0, 2.0, 3.0] and len(sim.latencies) == 1
+    stale = sim.stale_commands
+    cmd.effort = [6.0, 4.0, 5.0]
+    sim.on_command_raw(serialize_message(cmd))              # a second answer to one state
+    assert applied[-1] == [1.0, 2.0, 3.0] and sim.stale_commands == stale + 1
+    stamp = _stamp(12.504032)
+    sim._publish_state(stamp)
+    cmd.header.stamp = stamp
     sim.on_command(cmd)                                      # message-object path: the same
-    assert applied[-1] == [1.0, 2.0, 3.0]
-    unnamed = JointState(effort=[4.0, 5.0, 6.0, 7.0])
+    assert applied[-1] == [4.0, 5.0, 6.0]
+    unnamed = JointState(effort=[7.0, 8.0, 9.0, 10.0])
+    sim.on_command_raw(serialize_message(unnamed))          # stamp 0: answers no state
+    assert applied[-1] == [4.0, 5.0, 6.0] and sim.stale_commands == stale + 2
+    stamp = _stamp(12.508064)
+    sim._publish_state(stamp)
+    unnamed.header.stamp = stamp
     sim.on_command_raw(serialize_message(unnamed))
-    assert applied[-1] == [4.0, 5.0, 6.0]                   # no names: the first three
+    assert applied[-1] == [7.0, 8.0, 9.0]                   # no names: the first three
     n = len(applied)
     sim.on_command_raw(serialize_message(JointState(name=['joint_1'], effort=[1.0])))
     sim.on_command_raw(b'\x00\x01\x00')

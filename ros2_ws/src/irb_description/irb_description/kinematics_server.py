@@ -5,13 +5,13 @@ Thin adapter over ``RobotModel.ik``: points in, joint angles out, per-point reac
 from __future__ import annotations
 
 import numpy as np
-import rclpy
 from irb_interfaces.srv import SolveIk
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from .model import RobotModel, UnreachableError
-from .node_main import run_node
+from .node_main import run_node, spin_until_signal
 
 
 class KinematicsServer(Node):
@@ -50,8 +50,14 @@ def _descriptor(text: str):
     return ParameterDescriptor(description=text)
 
 
+def _spin(node: KinematicsServer) -> None:
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spin_until_signal(executor)
+
+
 def main(args=None):
-    run_node(KinematicsServer, rclpy.spin, args)
+    run_node(KinematicsServer, _spin, args)
 
 
 if __name__ == '__main__':

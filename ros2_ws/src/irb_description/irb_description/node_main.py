@@ -12,64 +12,75 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
 
 def run_node(make_node, spin, args=None) -> None:
     """The Jazzy main idiom, robust to Ctrl-C at any moment, also while the node is built.
 
-    ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor). The
-    first SIGINT or SIGTERM stops the node (KeyboardInterrupt out of ``spin``) and blocks both
-    signals from then on: a second Ctrl-C during the clean-up (closing files, writing
-    statistics) changes nothing, and the exit code is 0.
+    ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor); spin
+    loops run while ``running()``. The first SIGINT or SIGTERM only requests the stop (see
+    ``init``): the loop ends between callbacks, the node is destroyed with its context still
+    valid (statistics written, files closed, last log lines published) and the exit code is
+    0; later signals are ignored, so a second Ctrl-C cannot cut the clean-up.
     """
-    install_stop_signals()
-    rclpy.init(args=args)
+    init(args)
     node = None
     try:
-        try:
-            node, interrupted = build_node(make_node)
-            if interrupted:
-                raise KeyboardInterrupt
+        node, interrupted = build_node(make_node)
+        if not interrupted:
             # everything built so far lives as long as the node: out of the collector's way,
             # so that a full collection in the 248 Hz loop does not walk it (a few ms
             # otherwise)
             gc.collect()
             gc.freeze()
             spin(node)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        finally:
-            ignore_stop_signals()
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-            ignore_stop_signals()   # rclpy's shutdown restores the handlers it replaced
-    except KeyboardInterrupt:       # raised just before the signals were ignored: cleaned up
+    except ExternalShutdownException:
         pass
+    finally:
+        ignore_stop_signals()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
 
 
-_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_stop = threading.Event()
 
 
-_state = {'deferring': False, 'pending': False}
+def init(args=None) -> None:
+    """rclpy.init for a node's main(): SIGINT/SIGTERM handled here, not by rclpy.
+
+    rclpy's own handler shuts the context down from a thread of its own at any moment, so a
+    callback (or a loop between callbacks) meets "publisher's context is invalid" errors,
+    and a KeyboardInterrupt raised inside a running callback is logged by the executor as a
+    FATAL failure with its traceback. Here the first signal only sets the stop request that
+    ``running()`` reports (so the loops end between callbacks); later ones are ignored."""
+    for s in _SIGNALS:
+        signal.signal(s, _first_signal)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+
+
+def _first_signal(signum, frame):
+    ignore_stop_signals()
+    _stop.set()
+
+
+def stop_requested() -> bool:
+    """True once SIGINT or SIGTERM came (after ``init``)."""
+    return _stop.is_set()
+
+
+def running(context=None) -> bool:
+    """The condition of every spin loop: the context is valid and no stop was requested."""
+    return not _stop.is_set() and rclpy.ok(context=context)
 
 
 def build_node(make_node):
-    """(node, interrupted): ``make_node()`` with a Ctrl-C (handled by ``install_stop_signals``)
-    deferred until the node exists, so that a KeyboardInterrupt can never fall between its
-    construction and the caller holding it (whose clean-up would then be skipped).
-    ``interrupted``: a Ctrl-C came meanwhile (rclpy's own handler may also have shut the
-    context down: a construction that failed because of that is an interruption too)."""
-    _state['deferring'] = True
-    try:
-        node = make_node()
-    except BaseException:
-        if _state['pending'] or not rclpy.ok():
-            raise KeyboardInterrupt from None
-        raise
-    finally:
-        _state['deferring'] = False
-    return node, _state['pending'] or not node.context.ok()
+    """(node, interrupted): ``make_node()``, and whether a stop was requested before or during
+    it (the caller destroys the node and exits 0 then)."""
+    node = make_node()
+    return node, not running(node.context)
 
 
 def ignore_stop_signals() -> None:
@@ -77,22 +88,6 @@ def ignore_stop_signals() -> None:
     finalisation keeps SIG_IGN, so a late Ctrl-C cannot kill the exiting process either."""
     for s in _SIGNALS:
         signal.signal(s, signal.SIG_IGN)
-
-
-def install_stop_signals() -> None:
-    """Call before rclpy.init (main thread): the first SIGINT/SIGTERM raises
-    KeyboardInterrupt once (after rclpy's own handler, which it chains to), later ones are
-    ignored, so a second Ctrl-C cannot interrupt the clean-up."""
-    for s in _SIGNALS:
-        signal.signal(s, _first_signal)
-
-
-def _first_signal(signum, frame):
-    ignore_stop_signals()
-    if _state['deferring']:             # inside build_node: raised there, once the node exists
-        _state['pending'] = True
-        return
-    raise KeyboardInterrupt
 
 
 def declare(node: Node, name: str, default, description: str):
@@ -116,18 +111,9 @@ def latched_qos() -> QoSProfile:
 
 
 def spin_until_signal(executor, timeout_sec: float = 0.1, until=None) -> None:
-    """spin_once loop that ends on SIGINT/SIGTERM *between* callbacks (or when ``until()``).
-
-    A KeyboardInterrupt raised inside a callback is caught and logged by the executor as a
-    failure; here the signal only sets a flag, so the node shuts down cleanly. Also the way
-    to drive an EventsExecutor (its spin() ignores SIGTERM).
-    """
-    stop = threading.Event()
-    previous = {s: signal.signal(s, lambda *_: stop.set())
-                for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        while rclpy.ok() and not stop.is_set() and not (until is not None and until()):
-            executor.spin_once(timeout_sec=timeout_sec)
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+    """spin_once loop while ``running()`` and not ``until()``: a stop request (SIGINT/SIGTERM
+    after ``init``) ends it between callbacks, within ``timeout_sec``. Also the way to drive
+    an EventsExecutor or a MultiThreadedExecutor (their spin() does not see the request)."""
+    context = getattr(executor, 'context', None)    # the EventsExecutor has none
+    while running(context) and not (until is not None and until()):
+        executor.spin_once(timeout_sec=timeout_sec)

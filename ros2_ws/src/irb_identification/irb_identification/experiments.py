@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from irb_description.node_main import init, running
 from irb_description.stamps import sec_nanosec
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -181,7 +182,7 @@ class ExperimentsNode(Node):
     def _spin_until(self, executor, cond, deadline: float, what: str) -> None:
         """spin_once until cond(); RunError naming ``what`` at the wall-clock ``deadline``."""
         while not cond():
-            if not rclpy.ok(context=self.context):
+            if not running(self.context):
                 raise KeyboardInterrupt
             if time.monotonic() > deadline:
                 raise RunError(f'{what}: no progress within run_timeout_s = '
@@ -281,7 +282,7 @@ class ExperimentsNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
+    init(args)
     node = None
     try:
         node = ExperimentsNode()

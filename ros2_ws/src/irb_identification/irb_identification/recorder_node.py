@@ -10,8 +10,7 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
-from irb_description.node_main import (build_node, ignore_stop_signals, install_stop_signals,
-                                       spin_until_signal)
+from irb_description.node_main import build_node, ignore_stop_signals, init, spin_until_signal
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -166,8 +165,7 @@ class RecorderNode(Node):
 def main(args=None):
     """Exit 0 after Ctrl-C (bag closed); 1 with one line when the bag cannot be created or
     writing fails (a full disk: the closed splits are kept)."""
-    install_stop_signals()
-    rclpy.init(args=args)
+    init(args)
     try:
         node, interrupted = build_node(RecorderNode)
     except (BagError, OSError) as exc:
@@ -175,20 +173,14 @@ def main(args=None):
         print(f'recorder: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    except (KeyboardInterrupt, ExternalShutdownException):   # before the bag existed
-        ignore_stop_signals()
-        rclpy.try_shutdown()
-        return 0
     executor = None
     try:
-        if interrupted:
-            raise KeyboardInterrupt
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        # the signal ends the loop between callbacks: a KeyboardInterrupt inside a write
-        # callback would leave a half-written record in the file that close() then finishes
-        spin_until_signal(executor, until=lambda: bool(node.failed))
-    except (KeyboardInterrupt, ExternalShutdownException):
+        if not interrupted:
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            # the signal ends the loop between callbacks (never inside a write)
+            spin_until_signal(executor, until=lambda: bool(node.failed))
+    except ExternalShutdownException:
         pass
     except Exception:  # noqa: BLE001 - rclpy errors after Ctrl-C shut the context down
         if node.context.ok():

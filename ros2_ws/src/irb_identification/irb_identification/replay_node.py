@@ -9,7 +9,7 @@ import threading
 import time
 
 import rclpy
-from irb_description.node_main import build_node, ignore_stop_signals, install_stop_signals
+from irb_description.node_main import build_node, ignore_stop_signals, init, running
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -80,7 +80,7 @@ class ReplayNode(Node):
         except BagError as exc:
             self.error = str(exc)
         except Exception as exc:  # noqa: BLE001 - the thread must report, not print a trace
-            if not self.stop.is_set() and rclpy.ok(context=self.context):
+            if not self.stop.is_set() and running(self.context):
                 self.error = f'playing failed: {type(exc).__name__}: {exc}'
         finally:
             self.done.set()
@@ -104,25 +104,20 @@ class ReplayNode(Node):
 
 def main(args=None):
     """Exit 0 when the bag was played (or Ctrl-C), 1 with one line on a bad or damaged bag."""
-    install_stop_signals()
-    rclpy.init(args=args)
+    init(args)
     try:
         node, interrupted = build_node(ReplayNode)
     except BagError as exc:
         print(f'replay: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    except (KeyboardInterrupt, ExternalShutdownException):   # Ctrl-C while opening the bag
-        ignore_stop_signals()
-        rclpy.try_shutdown()
-        return 0
     player = threading.Thread(target=node.run, daemon=True)
     if not interrupted:
         player.start()
     try:
-        while not interrupted and rclpy.ok() and not node.done.is_set():
+        while not interrupted and running(node.context) and not node.done.is_set():
             rclpy.spin_once(node, timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:
         pass
     finally:
         ignore_stop_signals()

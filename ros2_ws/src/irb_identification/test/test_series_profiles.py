@@ -82,3 +82,4 @@ def test_joint_reference_moves_one_joint():
     assert_allclose(qd[:, 1], p.velocity(t))
     with pytest.raises(ValueError):
         ConstantVelocityProfile(0.0, 1.0, 1.0)
+

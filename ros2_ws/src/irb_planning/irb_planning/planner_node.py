@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import traceback
 
-from irb_description.node_main import run_node
+from irb_description.node_main import run_node, spin_until_signal
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from rcl_interfaces.msg import ParameterDescriptor
@@ -120,7 +120,7 @@ class PlannerNode(Node):
 def _spin(node: PlannerNode) -> None:
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
-    executor.spin()
+    spin_until_signal(executor)
 
 
 def main(args=None):

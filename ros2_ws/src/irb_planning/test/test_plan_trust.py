@@ -175,7 +175,9 @@ def test_cache_memory_is_bounded(model):
     for x in (0.55, 0.6, 0.65):
         planner.plan(PlanRequest(center=np.array([x, 0.0, 0.13]), duration=5.0))
     assert len(planner._cache) == 1
-    many = Planner(model.copy(), PlannerSettings(grid_size=40, cache_size=2))
+    # the count bound alone (a ceiling far above this process's size)
+    many = Planner(model.copy(), PlannerSettings(grid_size=40, cache_size=2,
+                                                 memory_limit_mib=1e6))
     for x in (0.55, 0.6, 0.65):
         many.plan(PlanRequest(center=np.array([x, 0.0, 0.13]), duration=5.0))
     assert len(many._cache) == 2
