@@ -120,7 +120,10 @@ def test_ctrl_c_while_callbacks_run(tmp_path):
             wait_for_line(ctrl, '-> ramp')            # the loop is closed: commands flow
             code, after = interrupt(sim, 1)
             assert_clean(code, before + after)
-            assert json.loads((tmp_path / f's{k}.json').read_text())['answered'] > 0
+            stats = json.loads((tmp_path / f's{k}.json').read_text())
+            # command callbacks ran (answers to the latest state, or late ones on a loaded
+            # machine, which the simulator ignores as the axis computer does)
+            assert stats['answered'] + stats['stale_commands_ignored'] > 0, stats
         finally:
             for p in (sim, ctrl):
                 if p.poll() is None:
