@@ -241,6 +241,9 @@ def bench_soak(minutes: float, path: str, load: bool) -> dict:
         loader = subprocess.Popen([sys.executable, '-c', 'while True: pass'],
                                   start_new_session=True)
     bagroot = Path(tempfile.mkdtemp(prefix='soak_bags_'))
+    sim_stats = bagroot / 'simulator_stats.json'
+    load_start = [round(x, 2) for x in os.getloadavg()]
+    out = None
     try:
         if path == 'axis':
             sp, cp = _free_udp_ports(2)
@@ -250,7 +253,7 @@ def bench_soak(minutes: float, path: str, load: bool) -> dict:
                     f'command_port:={cp}')
             reset = 'axis_bridge/reset'
         else:
-            g.start('simulator', 'irb_control', 'simulator')
+            g.start('simulator', 'irb_control', 'simulator', f'stats_path:={sim_stats}')
             reset = 'simulator/reset'
         g.start('pdplus', 'irb_control', 'pdplus', 'profile_duration_s:=10.0',
                 'auto_enable:=false')
@@ -293,14 +296,19 @@ def bench_soak(minutes: float, path: str, load: bool) -> dict:
                             'every motion', 'minutes': minutes, 'path': path,
                'cpu_load_process': load, 'motions': motions, 'stops': len(stops),
                'stops_per_hour': len(stops) / hours if hours else None,
-               'stops_by_reason': reasons, 'stop_list': stops[:50]}
-        return _write(f'soak_{path}{"_loaded" if load else ""}', out)
+               'stops_by_reason': reasons, 'stop_list': stops[:50],
+               'load_average_1_5_15_min_at_start': load_start}
     finally:
         if loader is not None:
             os.killpg(loader.pid, signal.SIGKILL)
             loader.wait()
         g.close()
+        if out is not None and sim_stats.exists():
+            # the simulator's own view: how late its states went out (a stalled simulator
+            # process is a gap the watchdog sees), late commands it ignored
+            out['simulator'] = json.loads(sim_stats.read_text())
         subprocess.run(['rm', '-rf', str(bagroot)])
+    return _write(f'soak_{path}{"_loaded" if load else ""}', out)
 
 
 def main() -> None:
