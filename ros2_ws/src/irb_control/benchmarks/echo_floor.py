@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -60,6 +59,7 @@ def measure(seconds: float = 20.0) -> dict:
     from sensor_msgs.msg import JointState
 
     from irb_control.node_util import make_executor
+    from irb_control.process_group import stop_sessions
     ns = f'/echo{os.getpid()}'
     child = subprocess.Popen([sys.executable, __file__, '--echo', ns], stdout=subprocess.PIPE,
                              stderr=subprocess.STDOUT, text=True, start_new_session=True)
@@ -108,12 +108,7 @@ def measure(seconds: float = 20.0) -> dict:
         ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
-        os.killpg(child.pid, signal.SIGINT)
-        try:
-            child.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(child.pid, signal.SIGKILL)
-            child.wait()
+        stop_sessions([child], 20.0)
     x = np.array(rtt) * 1e3
     ticks = int(seconds / PERIOD_S)
     return {'benchmark': 'bare rclpy echo, 2 processes, raw JointState, 248 Hz',
