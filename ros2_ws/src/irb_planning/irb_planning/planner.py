@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 from irb_description.friction import FrictionMap, FrictionMapError
 from irb_description.model import RobotModel, UnreachableError
-from irb_description.path import CirclePath, check_joint_path, joint_path
+from irb_description.path import (CirclePath, JointPath, PathBase, check_joint_path,
+                                  joint_path, path_from_spec)
 
 from .baselines import EnergyBound, trapezoid_profile
 from .evaluator import Evaluation, LimitSet, evaluate
@@ -43,7 +44,7 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
                             SolveRequest, Transcription)
-from .verify import ArmKinematics, Circle, MapFriction, Verification, verify_plan
+from .verify import ArmKinematics, Circle, MapFriction, PathCurve, Verification, verify_plan
 
 
 @dataclass(frozen=True)
@@ -137,7 +138,7 @@ class Planner:
         fm, block = read_map(path, self.model.joint_names)
         return fm, block['joints']
 
-    def sample_path(self, path: CirclePath):
+    def sample_path(self, path: PathBase):
         """theta (K,) -> JointPath of ``path`` (thread safe)."""
         def sample(theta):
             with self._model_lock:
@@ -159,7 +160,7 @@ class Planner:
             return np.array([self.model.inverse_dynamics(q[k], qd[k], qdd[k])
                              for k in range(q.shape[0])])
 
-    def check_path(self, req: PlanRequest, path: CirclePath) -> None:
+    def check_path(self, req: PlanRequest, path: PathBase) -> None:
         """The whole joint motion along the path (cached per path); PlanError(UNREACHABLE)."""
         key = req.path_key
         with self._cache_lock:
@@ -176,15 +177,17 @@ class Planner:
             while len(self._checked_paths) > 256:
                 self._checked_paths.popitem(last=False)
 
-    def _entry(self, req: PlanRequest, path: CirclePath, fm: FrictionMap) -> _Entry:
+    def _entry(self, req: PlanRequest, path: PathBase, fm: FrictionMap) -> _Entry:
         key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__())
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
                 return self._cache[key]
         s = self.settings
-        theta = np.linspace(0.0, 2 * np.pi, req.grid_size)
+        theta = theta_grid(req.grid_size, path.breaks)
         sample = self.sample_path(path)
+        if path.breaks.size:
+            sample = self._sample_curved_side(path, sample)
         try:
             nodes = path_dynamics(theta, sample, self._inverse_dynamics)
             mids = path_dynamics(0.5 * (theta[1:] + theta[:-1]), sample,
@@ -203,6 +206,28 @@ class Planner:
                 self._cache.popitem(last=False)
         self._trim_cache()
         return entry
+
+    @staticmethod
+    def _sample_curved_side(path: PathBase, sample):
+        """``sample`` that takes Phi, Phi', Phi'' at a piece end (where a polyline's
+        curvature jumps between a straight and a blend) from the more curved side, so the
+        node's torque rows hold for the blend up to its end (the other side, a straight,
+        needs less torque at the same speed)."""
+        eps = 1e-9
+
+        def at(theta):
+            theta = np.asarray(theta, float)
+            near = np.isin(theta, path.breaks)
+            if not np.any(near):
+                return sample(theta)
+            b = theta[near]
+            k_lo = np.linalg.norm(path.dd_point(b - eps), axis=-1)
+            k_hi = np.linalg.norm(path.dd_point(b + eps), axis=-1)
+            shifted = theta.copy()
+            shifted[near] = np.where(k_lo > k_hi, b - eps, b + eps)
+            jp = sample(shifted)
+            return JointPath(theta, jp.q, jp.dq, jp.ddq)
+        return at
 
     def _trim_cache(self) -> None:
         """Drop least recently used problems (never the newest) while the process's resident
@@ -255,6 +280,11 @@ class Planner:
                            sreq.torque_limit)
             vel = np.where(over_v > 0, sreq.velocity_limit - over_v - 1e-3 * checked.velocity,
                            sreq.velocity_limit)
+            if np.any(tau < 0.25 * checked.torque) or np.any(vel < 0.25 * checked.velocity):
+                raise PlanError(ERROR_SOLVER, 'between the grid nodes the motion exceeds a '
+                                'limit by far more than at them (' + '; '.join(
+                                    ev.violations + ver.problems)[:300] + '): the grid is too '
+                                'coarse for this path, ask for a larger grid_size')
             notes.append('limits tightened after the exact check: '
                          + '; '.join(ev.violations + ver.problems))
             sreq = replace(sreq, torque_limit=tau, velocity_limit=vel)
@@ -414,7 +444,7 @@ class Planner:
             joint_names=list(self.model.joint_names), request=req, fourier_coeffs=coeffs,
             notes=notes, trajectory=trajectory, verification=verification)
 
-    def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: CirclePath,
+    def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: PathBase,
                    fm: FrictionMap, raw_map: dict, checked: LimitSet
                    ) -> tuple[dict, Verification]:
         """The message's points and their independent check: the profile's nodes, each
@@ -425,8 +455,11 @@ class Planner:
         s = self.settings
         sample, torque = self.sample_path(path), self.torque(fm)
         kin = ArmKinematics(velocity=checked.velocity, torque=checked.torque, **self._kin)
-        circle = Circle(np.asarray(req.center, float), float(req.radius),
-                        float(req.start_angle), int(req.direction))
+        if type(path) is CirclePath:
+            circle = Circle(np.asarray(req.center, float), float(req.radius),
+                            float(req.start_angle), int(req.direction))
+        else:
+            circle = PathCurve(path.point, path.d_point, path.dd_point, path.closed)
         friction = MapFriction(raw_map, self.model.joint_names)
         nodes = profile.theta
         prof = (nodes, profile.theta_dot, profile.theta_ddot_nodes, profile.quadratic)
@@ -460,6 +493,32 @@ class Planner:
     def node_samples(self, result: PlanResult) -> dict:
         """The plan's trajectory message points (checked): t (K,) [s]; q, qd, qdd, tau (K, n)."""
         return result.trajectory
+
+
+def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 3) -> np.ndarray:
+    """n nodes over [0, 2 pi]: uniform (np.linspace, the thesis circle's grid) for a path
+    without pieces; with pieces (``breaks``, where the curvature jumps: a polyline's blends)
+    a node at every piece end and at least ``min_intervals`` uniform intervals per piece
+    (fewer if n is too small for that), the rest shared in proportion to length, so that
+    the NLP sees every blend and never averages a corner's torque over a straight."""
+    breaks = np.asarray(breaks, float)
+    if breaks.size == 0:
+        return np.linspace(0.0, 2 * np.pi, n)
+    edges = np.concatenate([[0.0], breaks, [2 * np.pi]])
+    span = np.diff(edges)
+    m = n - 1
+    floor = min(min_intervals, max(m // span.size, 1))
+    if floor * span.size > m:
+        return np.linspace(0.0, 2 * np.pi, n)     # more pieces than nodes: uniform
+    k = np.maximum(np.floor(m * span / (2 * np.pi)).astype(int), floor)
+    while k.sum() > m:                            # give back from the coarsest pieces
+        i = int(np.argmax(np.where(k > floor, span / k, -1.0)))
+        k[i] -= 1
+    while k.sum() < m:                            # add to the coarsest piece
+        k[int(np.argmax(span / k))] += 1
+    theta = np.concatenate([np.linspace(a, b, c + 1)[:-1] for a, b, c in
+                            zip(edges[:-1], edges[1:], k)] + [[2 * np.pi]])
+    return theta
 
 
 def resident_mib() -> float:
@@ -496,10 +555,12 @@ def _status_text(status: str) -> str:
     }.get(status, status.replace('_', ' ').lower())
 
 
-def request_path(req: PlanRequest) -> CirclePath:
+def request_path(req: PlanRequest) -> PathBase:
     """The geometric path of a (validated) request: the one place a request becomes a path."""
     try:
-        return CirclePath(req.center, req.radius, req.start_angle, req.direction)
+        if req.path_type == 'circle':
+            return CirclePath(req.center, req.radius, req.start_angle, req.direction)
+        return path_from_spec(req.path_spec())
     except ValueError as exc:
         raise PlanError(ERROR_INVALID_REQUEST, str(exc)) from exc
 
