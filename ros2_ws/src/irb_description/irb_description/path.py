@@ -666,3 +666,20 @@ def check_joint_path(model: RobotModel, path: PathBase, samples: int = 4096,
                 f'({name} = {np.degrees(q[k, i]):.1f} deg there'
                 + (', continuing across +-180 deg' if i == 0 and abs(q[k, i]) > np.pi - 0.2
                    else '') + ')')
+
+
+def load_path_file(name) -> PathBase:
+    """A path from a YAML file holding a ``path_from_spec`` mapping; ValueError with one line
+    saying why not (missing file, not YAML, not a valid path)."""
+    import yaml
+    try:
+        with open(name) as f:
+            spec = yaml.safe_load(f)
+    except OSError as exc:
+        raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'path file {name} is not YAML: {str(exc).splitlines()[0]}') from None
+    try:
+        return path_from_spec(spec)
+    except ValueError as exc:
+        raise ValueError(f'path file {name}: {exc}') from None
