@@ -288,6 +288,7 @@ def main(args=None) -> int:
         g.stop()
         log(f'4/{PHASES} energy-optimal circle without compensation')
         g = graph([sim, controller('none'), planner])
+        link.plan_status = None    # a new pdplus counts its verdicts from 0
         execute(g, 'energy_noff', 'energy', fmap)
         g.stop()
 
@@ -300,6 +301,7 @@ def main(args=None) -> int:
             f'{rect["blend_radius_m"] * 1e3:.0f} mm blends, tilted plane, '
             f'{rect["duration_s"]} s, energy-optimal and trapezoidal, identified FF')
         g = graph([sim, controller('file', rect_file), planner])
+        link.plan_status = None
         execute(g, 'rect_energy_ff', 'energy', fmap, rect_msg, float(rect['duration_s']))
         execute(g, 'rect_trapezoid_ff', 'trapezoid', fmap, rect_msg, float(rect['duration_s']))
         g.stop()
