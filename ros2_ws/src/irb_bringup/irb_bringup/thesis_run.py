@@ -244,13 +244,13 @@ def main(args=None) -> int:
                                             for t in ('/joint_states', '/controller_state',
                                                       '/camera/tcp')), 60):
                 raise RuntimeError(f'recorder for {label} did not subscribe')
-            def accepted():
-                st = link.plan_status
-                return st.accepted_count + st.refused_count if st is not None else 0
-            n_plans = accepted()
             plans[label] = link.plan(cfg, objective, friction, g, path, duration)
-            # pdplus checks every plan (its plan gate) and says so on ~/plan_status
-            if not link.spin_until(lambda: accepted() > n_plans, 60, g):
+            stamp = plans[label].trajectory.header.stamp
+            # pdplus checks every plan (its plan gate) and says so on ~/plan_status; the verdict
+            # is the one about this plan (its stamp), not a count: each phase starts a new
+            # pdplus whose counters start at zero again
+            if not link.spin_until(lambda: link.plan_status is not None
+                                   and link.plan_status.plan_stamp == stamp, 60, g):
                 raise RuntimeError(f'pdplus gave no verdict on the {label} plan')
             if not link.plan_status.accepted:
                 raise RuntimeError(f'pdplus refused the {label} plan: '
@@ -288,7 +288,6 @@ def main(args=None) -> int:
         g.stop()
         log(f'4/{PHASES} energy-optimal circle without compensation')
         g = graph([sim, controller('none'), planner])
-        link.plan_status = None    # a new pdplus counts its verdicts from 0
         execute(g, 'energy_noff', 'energy', fmap)
         g.stop()
 
@@ -301,7 +300,6 @@ def main(args=None) -> int:
             f'{rect["blend_radius_m"] * 1e3:.0f} mm blends, tilted plane, '
             f'{rect["duration_s"]} s, energy-optimal and trapezoidal, identified FF')
         g = graph([sim, controller('file', rect_file), planner])
-        link.plan_status = None
         execute(g, 'rect_energy_ff', 'energy', fmap, rect_msg, float(rect['duration_s']))
         execute(g, 'rect_trapezoid_ff', 'trapezoid', fmap, rect_msg, float(rect['duration_s']))
         g.stop()
@@ -343,12 +341,11 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     """Figures from the bags, plots, report.md and summary.json."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
+    from irb_description.path import load_path_file
     from irb_planning.plot import plot_plan
 
-    from .run_report import markdown_report, plot_runs, run_figures, saving_percent
-    from irb_description.path import load_path_file
-
-    from .run_report import rectangle_section
+    from .run_report import (markdown_report, plot_runs, rectangle_section, run_figures,
+                             saving_percent)
     center, radius = np.array(cfg['center_m'], float), float(cfg['radius_m'])
     rect = load_path_file(rect_file) if rect_file is not None else None
     figs = {k: (run_figures(v, k, path=rect) if k.startswith('rect_')
