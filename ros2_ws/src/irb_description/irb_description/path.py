@@ -51,17 +51,22 @@ class PathBase:
         return th, self.point(th)
 
     def theta_of(self, p: np.ndarray) -> np.ndarray:
-        """theta in [0, 2 pi] of the nearest path point to each of p (..., 3) [m]."""
+        """theta in [0, 2 pi] of the nearest path point to each of p (..., 3) [m]: the
+        nearest point of a dense table (scipy KD-tree), then Newton steps on
+        (p(theta) - x) . p'(theta) = 0 inside the two table intervals around it, all points
+        at once (on a closed path also from the other end of the table)."""
         p = np.asarray(p, float)
         flat = p.reshape(-1, 3)
-        th, pts = self._table()
-        out = np.empty(flat.shape[0])
-        for k, x in enumerate(flat):
-            j = int(np.argmin(((pts - x) ** 2).sum(axis=1)))
-            cands = [j, th.size - 1] if self.closed and j == 0 else [j]
-            ts = [_refine(self, x, th, i) for i in cands]
-            out[k] = min(ts, key=lambda t: float(((self.point(t) - x) ** 2).sum()))
+        th, tree = self._table()
+        _, j = tree.query(flat)
+        out = _newton(self, flat, th, j)
         if self.closed:
+            last = th.size - 1
+            alt = np.where(j == 0, last, np.where(j == last, 0, j))
+            t2 = _newton(self, flat, th, alt)
+            d1 = np.linalg.norm(self.point(out) - flat, axis=1)
+            d2 = np.linalg.norm(self.point(t2) - flat, axis=1)
+            out = np.where(d2 < d1, t2, out)
             out = np.where(out >= TWO_PI, out - TWO_PI, out)
         return out.reshape(p.shape[:-1])
 
@@ -73,28 +78,28 @@ class PathBase:
     def _table(self):
         cache = self.__dict__.get('_table_cache')
         if cache is None:
-            cache = self.table()
+            from scipy.spatial import cKDTree
+            th, pts = self.table(1e-3)
+            cache = (th, cKDTree(pts))
             object.__setattr__(self, '_table_cache', cache)
         return cache
 
 
-def _refine(path, x, th, j, iters: int = 8) -> float:
-    """theta near table index j minimising |p(theta) - x|: Newton on (p - x) . p' = 0, kept
-    inside the two table intervals around j."""
-    lo, hi = th[max(j - 1, 0)], th[min(j + 1, th.size - 1)]
-    t = th[j]
+def _newton(path, x, th, j, iters: int = 8) -> np.ndarray:
+    """theta (M,) near table indices j (M,) minimising |p(theta) - x| for points x (M, 3):
+    Newton on (p - x) . p' = 0, kept inside the two table intervals around each j."""
+    lo, hi = th[np.maximum(j - 1, 0)], th[np.minimum(j + 1, th.size - 1)]
+    t = th[j].astype(float)
     for _ in range(iters):
         d = path.point(t) - x
         d1 = path.d_point(t)
-        f = float(d @ d1)
-        fp = float(d1 @ d1 + d @ path.dd_point(t))
-        if fp <= 0:
+        f = (d * d1).sum(axis=1)
+        fp = (d1 * d1).sum(axis=1) + (d * path.dd_point(t)).sum(axis=1)
+        step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
+        t = np.clip(t - step, lo, hi)
+        if np.abs(step).max(initial=0.0) < 1e-14:
             break
-        step = f / fp
-        t = min(max(t - step, lo), hi)
-        if abs(step) < 1e-14:
-            break
-    return float(t)
+    return t
 
 
 @dataclass(frozen=True)

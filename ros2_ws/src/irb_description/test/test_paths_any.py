@@ -200,8 +200,8 @@ def test_along_path_check_finds_limits_and_branch_changes(model):
                                               [0.6, 0.5, 0.2]], 0.05))
 
 
-def test_tracker_follows_noisy_points_and_costs_little():
-    import time
+def test_tracker_follows_noisy_points():
+    """(Its cost per update is measured by irb_control's bench_path_tracking.py.)"""
     for name in ('rectangle', 'spline_closed', 'line', 'polyline'):
         p = PATHS[name]
         tr = PathTracker(p)
@@ -209,16 +209,13 @@ def test_tracker_follows_noisy_points_and_costs_little():
         rng = np.random.default_rng(3)
         pts = p.point(th) + rng.normal(0.0, 1e-4, (th.size, 3))
         prev, est = 0.0, np.empty(th.size)
-        t0 = time.perf_counter()
         for k, x in enumerate(pts):
             prev = est[k] = tr.update(x, prev)
-        per = (time.perf_counter() - t0) / th.size
         along = np.abs((est - th + np.pi) % (2 * np.pi) - np.pi) * p.length / (2 * np.pi)
         assert along.max() < 6e-4, name          # 1e-4 m noise, 6 sigma
         exact = np.array([tr.update(x, t) for x, t in zip(p.point(th), th)])
         err = np.abs((exact - th + np.pi) % (2 * np.pi) - np.pi)
         assert err.max() * p.length / (2 * np.pi) < 1e-8, name
-        assert per < 2e-4       # generous bound for a loaded machine; benchmark: ~20 us
 
 
 def test_tracker_does_not_jump_to_a_near_part_of_the_path():
