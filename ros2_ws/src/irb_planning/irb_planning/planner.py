@@ -186,9 +186,15 @@ class Planner:
         s = self.settings
         theta = theta_grid(req.grid_size, path.breaks)
         sample = self.sample_path(path)
-        if path.breaks.size:
-            sample = self._sample_curved_side(path, sample)
+        sides = None
         try:
+            if path.breaks.size:
+                plain = sample
+                sample = self._sample_side(path, plain, curved=True)
+                idx = np.flatnonzero(np.isin(theta, path.breaks))
+                sides = (idx, path_dynamics(theta[idx],
+                                            self._sample_side(path, plain, curved=False),
+                                            self._inverse_dynamics))
             nodes = path_dynamics(theta, sample, self._inverse_dynamics)
             mids = path_dynamics(0.5 * (theta[1:] + theta[:-1]), sample,
                                  self._inverse_dynamics)
@@ -196,7 +202,7 @@ class Planner:
             raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
         friction = casadi_friction(fm, s.friction_smoothing_rad_s)
         tr = Transcription(nodes, mids, friction, req.boundary, s.abs_smoothing_j_rad,
-                           s.max_iterations, s.tolerance, s.warm_start)
+                           s.max_iterations, s.tolerance, s.warm_start, sides)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
@@ -208,11 +214,12 @@ class Planner:
         return entry
 
     @staticmethod
-    def _sample_curved_side(path: PathBase, sample):
+    def _sample_side(path: PathBase, sample, curved: bool):
         """``sample`` that takes Phi, Phi', Phi'' at a piece end (where a polyline's
-        curvature jumps between a straight and a blend) from the more curved side, so the
-        node's torque rows hold for the blend up to its end (the other side, a straight,
-        needs less torque at the same speed)."""
+        curvature jumps between a straight and a blend) from its more curved side
+        (``curved``) or from the other one. The nodes use the curved side (the energy rows
+        and the blend's torque up to its end); the transcription adds torque rows for the
+        other side, so the limits hold on both."""
         eps = 1e-9
 
         def at(theta):
@@ -223,8 +230,9 @@ class Planner:
             b = theta[near]
             k_lo = np.linalg.norm(path.dd_point(b - eps), axis=-1)
             k_hi = np.linalg.norm(path.dd_point(b + eps), axis=-1)
+            lo_side = (k_lo > k_hi) if curved else ~(k_lo > k_hi)
             shifted = theta.copy()
-            shifted[near] = np.where(k_lo > k_hi, b - eps, b + eps)
+            shifted[near] = np.where(lo_side, b - eps, b + eps)
             jp = sample(shifted)
             return JointPath(theta, jp.q, jp.dq, jp.ddq)
         return at
@@ -449,8 +457,9 @@ class Planner:
                    ) -> tuple[dict, Verification]:
         """The message's points and their independent check: the profile's nodes, each
         interval split into m equal theta pieces (m = 1, 2, 4, ...) until the trajectory
-        played by quintic interpolation stays within path_tolerance_m / 2 of the path, or the
-        point budget is used (the check then says whether it is within path_tolerance_m).
+        played by quintic interpolation stays within path_tolerance_m / 2 of the path and
+        inside the torque and speed limits, or the point budget is used (the check then says
+        whether it is within path_tolerance_m).
         Limits the check finds broken are for ``_solve_checked`` to fix."""
         s = self.settings
         sample, torque = self.sample_path(path), self.torque(fm)
@@ -475,7 +484,11 @@ class Planner:
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
                               req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
                               path_tolerance_m=s.path_tolerance_m)
-            if (ver.max_path_deviation <= 0.5 * s.path_tolerance_m
+            # also denser while the played (quintic) trajectory breaks a torque or speed
+            # limit: between sparse points at speed through a tight blend its acceleration,
+            # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
+            played_limit = any(' torque ' in p or ' speed ' in p for p in ver.problems)
+            if ((ver.max_path_deviation <= 0.5 * s.path_tolerance_m and not played_limit)
                     or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points):
                 break
             m *= 2
@@ -495,7 +508,7 @@ class Planner:
         return result.trajectory
 
 
-def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 3) -> np.ndarray:
+def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:
     """n nodes over [0, 2 pi]: uniform (np.linspace, the thesis circle's grid) for a path
     without pieces; with pieces (``breaks``, where the curvature jumps: a polyline's blends)
     a node at every piece end and at least ``min_intervals`` uniform intervals per piece
