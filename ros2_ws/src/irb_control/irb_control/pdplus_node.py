@@ -14,6 +14,7 @@ answered.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -102,9 +103,12 @@ class PdPlusNode(Node):
         self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
         self.P = P
         self.model = RobotModel.load()
-        self.path = (load_path_file(P['path_file']) if P['path_file'] else
-                     CirclePath(np.array(P['path_center'], float), P['path_radius'],
-                                P['path_start_angle'], int(P['path_direction'])))
+        try:
+            self.path = (load_path_file(P['path_file']) if P['path_file'] else
+                         CirclePath(np.array(P['path_center'], float), P['path_radius'],
+                                    P['path_start_angle'], int(P['path_direction'])))
+        except ValueError as exc:
+            raise PathConfigError(str(exc)) from None
         tl = P['torque_limit_nm']
         cfg = ControllerConfig(
             kp=tuple(P['kp']), kd=tuple(P['kd']), period_s=P['period_s'],
@@ -447,9 +451,17 @@ def _joint_indices(names: tuple, joints: list[str]) -> tuple | None:
         return None
 
 
+class PathConfigError(ValueError):
+    """The configured path (path_file or the path_* circle) is not usable."""
+
+
 def main(args=None):
-    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
-             args)
+    try:
+        run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
+                 args)
+    except PathConfigError as exc:       # one line and exit 1, no traceback
+        print(f'pdplus: {exc}', file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == '__main__':

@@ -89,3 +89,23 @@ def test_plans_of_any_path_become_profiles(model):
     with pytest.raises(Exception, match='does not follow'):
         profile_from_joint_trajectory(model, thesis_circle(), prof.t, prof.q, prof.qd, prof.qdd)
     assert path_spec(RECT)['closed']
+
+
+@pytest.mark.parametrize('text, words', [
+    ('type: polyline\nwaypoints: [[0.5, 0, 0.3], [0.7, 0, 0.3], [0.5, 0, 0.3]]\n'
+     'blend_radii: [0.01]\n', 'turns back'),
+    (None, 'cannot read path file'),
+])
+def test_pdplus_refuses_a_bad_path_file_with_one_line(tmp_path, text, words):
+    import os
+    import subprocess
+    f = tmp_path / 'path.yaml'
+    if text is not None:
+        f.write_text(text)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    res = subprocess.run(['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-p',
+                          f'path_file:={f}'], capture_output=True, text=True, timeout=60,
+                         env=env)
+    assert res.returncode == 1
+    assert words in res.stderr and 'Traceback' not in res.stderr
+    assert res.stderr.strip().count('\n') == 0
