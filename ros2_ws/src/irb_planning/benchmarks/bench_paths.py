@@ -85,6 +85,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--grid', type=int, default=400)
     ap.add_argument('--warm', type=int, default=30)
+    ap.add_argument('--no-types', action='store_true', help='only the 10-segment polyline')
+    ap.add_argument('--circle', action='store_true',
+                    help='also the thesis circle warm at the same grid, same load (reference)')
     a = ap.parse_args()
     out = {'grid': a.grid, 'load_average_before': os.getloadavg()}
     spec = meander()
@@ -128,8 +131,19 @@ def main():
         'p90_solve_s': float(np.percentile(solve, 90)), 'max_solve_s': float(max(solve)),
         'median_plan_call_s': float(np.median(total)),
         'median_iterations': float(np.median(iters))}
+    if a.circle:
+        cp = Planner(planner.model.copy(), PlannerSettings(grid_size=a.grid))
+        Tc = 1.5 * cp.plan(PlanRequest(objective='time')).min_duration
+        cp.plan(PlanRequest(duration=Tc))
+        cs = []
+        for i in range(a.warm):
+            Tc = float(Tc * rng.uniform(0.95, 1.05))
+            cs.append(cp.plan(PlanRequest(duration=Tc)).solve_time)
+        out['thesis_circle_same_grid'] = {'median_solve_s': float(np.median(cs)),
+                                          'max_solve_s': float(max(cs))}
+        print('circle', out['thesis_circle_same_grid'], flush=True)
     per_type = {}
-    for name, sp in TYPES.items():
+    for name, sp in ({} if a.no_types else TYPES).items():
         pl = Planner(planner.model.copy(), PlannerSettings(grid_size=a.grid))
         s = time.perf_counter()
         tmin = pl.plan(request(sp, objective='time')).min_duration
