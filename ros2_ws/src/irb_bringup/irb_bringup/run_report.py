@@ -3,7 +3,8 @@
 A run's bag holds /joint_states (effort = applied torque), /controller_state and /camera/tcp.
 The path window is where the controller was in MODE_PATH; inside it:
 energy E = int sum_i |tau_i qd_i| dt (thesis eq. 6.9) from the joint states, and the camera's
-path error = distance of each camera point from the circle.
+path error = distance of each camera point from the circle (or from any other path, e.g. the
+gluing rectangle, by the path's own projection, irb_description.path).
 """
 from __future__ import annotations
 
@@ -54,8 +55,10 @@ def _stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def run_figures(bag: str | Path, label: str, center: np.ndarray, radius: float) -> RunFigures:
-    """Figures of the path phase of one run; raises ValueError if the bag has no path phase."""
+def run_figures(bag: str | Path, label: str, center: np.ndarray | None = None,
+                radius: float | None = None, path=None) -> RunFigures:
+    """Figures of the path phase of one run on the circle (center, radius) or on ``path``
+    (an irb_description path); raises ValueError if the bag has no path phase."""
     store = typestore([CONTROLLER_STATE])
     raw = read_messages(bag, ['/controller_state', '/camera/tcp'])
     ctrl = raw['/controller_state']
@@ -81,8 +84,9 @@ def run_figures(bag: str | Path, label: str, center: np.ndarray, radius: float) 
     order = np.argsort(t_cam, kind='stable')   # camera points arrive in batches, not in order
     t_cam, p = t_cam[order], p[order]
     sel = (t_cam >= t0) & (t_cam <= t1)
-    return RunFigures(label, str(bag), t, power, tau, qd, t_cam[sel] - t0,
-                      circle_error(p[sel], np.asarray(center, float), radius),
+    err = (np.asarray(path.distance(p[sel]), float).reshape(-1) if path is not None
+           else circle_error(p[sel], np.asarray(center, float), radius))
+    return RunFigures(label, str(bag), t, power, tau, qd, t_cam[sel] - t0, err,
                       float(np.trapezoid(power, t)), float(t1 - t0))
 
 
@@ -140,8 +144,10 @@ def saving_percent(optimal: float, baseline: float) -> float:
 def markdown_report(run_id: str, energy: RunFigures, trapezoid: RunFigures,
                     no_ff: RunFigures, plots: dict[str, str], friction_rows: list[tuple],
                     friction_plots: list[str], plan_rows: list[tuple], plan_plot: str | None,
-                    bags: dict[str, str], notes: list[str], out: Path) -> str:
-    """Write the one-page report ``out`` (Markdown, PNGs referenced relatively)."""
+                    bags: dict[str, str], notes: list[str], out: Path,
+                    sections: list[str] | None = None) -> str:
+    """Write the one-page report ``out`` (Markdown, PNGs referenced relatively); ``sections``:
+    further Markdown lines before the bags (e.g. ``rectangle_section``)."""
     def rel(p):
         return Path(p).resolve().relative_to(out.parent.resolve()).as_posix() \
             if Path(p).resolve().is_relative_to(out.parent.resolve()) else str(p)
@@ -177,6 +183,7 @@ def markdown_report(run_id: str, energy: RunFigures, trapezoid: RunFigures,
         '|---|---|---|---|---|',
         *[f'| {r[0]} | {r[1]:.1f} | {r[2]:.2f} | {r[3]} | {r[4]:.2f} |' for r in plan_rows], '',
         *([f'![plan]({rel(plan_plot)})', ''] if plan_plot else []),
+        *(sections or []),
         '## Bags', '',
         *[f'- {k}: `{v}`' for k, v in bags.items()], '',
         *(['## Notes', '', *[f'- {n}' for n in notes], ''] if notes else []),
@@ -184,3 +191,30 @@ def markdown_report(run_id: str, energy: RunFigures, trapezoid: RunFigures,
     text = '\n'.join(lines)
     out.write_text(text)
     return text
+
+
+def rectangle_section(energy: RunFigures, trapezoid: RunFigures, plots: dict[str, str],
+                      plan_e, plan_t, rect: dict, path, out: Path) -> list[str]:
+    """Markdown lines of the gluing-contour task: the two runs' energy and camera path
+    error, the plans' figures, the plots. plan_e/plan_t: the planner's responses."""
+    def rel(p):
+        return Path(p).resolve().relative_to(out.parent.resolve()).as_posix() \
+            if Path(p).resolve().is_relative_to(out.parent.resolve()) else str(p)
+    saving = saving_percent(energy.energy, trapezoid.energy)
+    speed = path.length / max(energy.duration, 1e-9)
+    return [
+        '## Gluing contour: rectangle with blended corners in a tilted plane', '',
+        f'{rect["width_m"]} x {rect["height_m"]} m about {rect["center_m"]} m, plane normal '
+        f'{rect["normal"]}, {rect["blend_radius_m"] * 1e3:.0f} mm corner blends, '
+        f'length {path.length:.3f} m in {rect["duration_s"]} s (mean TCP speed '
+        f'{speed:.3f} m/s); pdplus follows it by projection (PathTracker).', '',
+        '| run | duration [s] | energy [J] | camera path error mean [mm] | max [mm] |',
+        '|---|---|---|---|---|',
+        *[f'| {name}, identified FF | {r.duration:.2f} | {r.energy:.1f} | '
+          f'{r.err_mean_mm:.3f} | {r.err_max_mm:.3f} |'
+          for name, r in (('energy-optimal', energy), ('trapezoid along arc length',
+                                                       trapezoid))], '',
+        f'**Saving: {saving:.1f} %** of the trapezoidal run\'s energy (planned: '
+        f'{plan_e.energy:.1f} J vs {plan_t.energy:.1f} J).', '',
+        f'![power]({rel(plots["power"])})', '',
+        f'![path error]({rel(plots["path_error"])})', '']

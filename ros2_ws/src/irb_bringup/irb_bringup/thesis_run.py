@@ -6,7 +6,11 @@ On the simulator, each phase a node graph of separate processes (irb_control.pro
 3. the thesis circle planned energy-optimally and as the trapezoidal baseline at the same
    duration, both executed by pdplus with the identified compensation, recorded;
 4. the energy-optimal circle again with no compensation;
-5. a one-page report (Markdown + PNG) under runs/<run id>/, bags under bags/<run id>_*.
+5. a real-looking task: a gluing contour, a rectangle with blended corners in a tilted plane
+   (config ``rectangle``), planned energy-optimally and as the trapezoid along arc length at
+   the same duration, both executed by pdplus (following that path) with the identified
+   compensation, recorded;
+6. a one-page report (Markdown + PNG) under runs/<run id>/, bags under bags/<run id>_*.
 Ctrl-C or any node's failure stops the graph cleanly; a second run never overwrites a first.
 """
 from __future__ import annotations
@@ -23,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-PHASES = 5
+PHASES = 6
 
 
 class Lines:
@@ -112,16 +116,21 @@ class Link:
             self.ex.spin_once(timeout_sec=0.05)
         return cond()
 
-    def plan(self, cfg, objective, friction_map, group):
+    def plan(self, cfg, objective, friction_map, group, path=None, duration=None):
+        """Plan on the thesis circle of ``cfg``, or on ``path`` (a PathSpec) for ``duration``
+        [s]."""
         if not self.spin_until(lambda: self.client.service_is_ready(), 60, group):
             raise RuntimeError('planner service plan_path did not come up')
         req = self.PlanPath.Request()
-        req.path.type = 'circle'
-        req.path.center.x, req.path.center.y, req.path.center.z = cfg['center_m']
-        req.path.radius = float(cfg['radius_m'])
-        req.path.direction = 1
+        if path is not None:
+            req.path = path
+        else:
+            req.path.type = 'circle'
+            req.path.center.x, req.path.center.y, req.path.center.z = cfg['center_m']
+            req.path.radius = float(cfg['radius_m'])
+            req.path.direction = 1
         req.objective = objective
-        req.duration = float(cfg['circle_duration_s'])
+        req.duration = float(cfg['circle_duration_s'] if duration is None else duration)
         req.grid_size = int(cfg['planner_grid'])
         req.friction_map = str(friction_map)
         fut = self.client.call_async(req)
@@ -226,7 +235,7 @@ def main(args=None) -> int:
         executed = {}
         plans = {}
 
-        def execute(g, label, objective, friction):
+        def execute(g, label, objective, friction, path=None, duration=None):
             name = f'{run_id}_{label}'
             link.modes.clear()
             g.add(ProcessSpec(f'rec_{label}', ros2_run_cmd(
@@ -235,7 +244,7 @@ def main(args=None) -> int:
                                             for t in ('/joint_states', '/controller_state',
                                                       '/camera/tcp')), 60):
                 raise RuntimeError(f'recorder for {label} did not subscribe')
-            plans[label] = link.plan(cfg, objective, friction, g)
+            plans[label] = link.plan(cfg, objective, friction, g, path, duration)
             stamp = plans[label].trajectory.header.stamp
             # pdplus checks every plan (its plan gate) and says so on ~/plan_status; the verdict
             # is the one about this plan (its stamp), not a count: each phase starts a new
@@ -258,10 +267,12 @@ def main(args=None) -> int:
             executed[label] = str(bags / name)
             log(f'   {label}: done, bag {bags / name}')
 
-        def controller(friction_mode):
+        def controller(friction_mode, path_file=None):
             # auto_enable off: the built-in profile must not start before the plan arrives
             params = {'use_sim_time': True, 'friction_mode': friction_mode,
                       'auto_enable': False}
+            if path_file is not None:
+                params['path_file'] = str(path_file)
             if friction_mode == 'file':
                 params['friction_map_file'] = str(fmap)
             return ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', params=params))
@@ -281,9 +292,22 @@ def main(args=None) -> int:
         g.stop()
 
         # 5 ---------------------------------------------------------------------------------
-        log(f'5/{PHASES} report')
+        rect = cfg['rectangle']
+        rect_file = write_rectangle(rect, out / 'rectangle_path.yaml')
+        from irb_planning.messages import path_msg_from_spec
+        rect_msg = path_msg_from_spec(yaml.safe_load(rect_file.read_text()))
+        log(f'5/{PHASES} gluing contour: {rect["width_m"]} x {rect["height_m"]} m rectangle, '
+            f'{rect["blend_radius_m"] * 1e3:.0f} mm blends, tilted plane, '
+            f'{rect["duration_s"]} s, energy-optimal and trapezoidal, identified FF')
+        g = graph([sim, controller('file', rect_file), planner])
+        execute(g, 'rect_energy_ff', 'energy', fmap, rect_msg, float(rect['duration_s']))
+        execute(g, 'rect_trapezoid_ff', 'trapezoid', fmap, rect_msg, float(rect['duration_s']))
+        g.stop()
+
+        # 6 ---------------------------------------------------------------------------------
+        log(f'6/{PHASES} report')
         write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags,
-                     time.monotonic() - t_start)
+                     time.monotonic() - t_start, rect_file)
         log(f'done in {time.monotonic() - t_start:.0f} s: {out / "report.md"}')
         return 0
     except KeyboardInterrupt:
@@ -302,15 +326,30 @@ def main(args=None) -> int:
             link.close()
 
 
-def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags, elapsed):
+def write_rectangle(rect: dict, out: Path) -> Path:
+    """The gluing contour of the config's ``rectangle`` block as a path YAML file (what
+    pdplus's path_file and the plan client read)."""
+    from irb_description.path import path_spec, rectangle_path
+    path = rectangle_path(rect['center_m'], rect['normal'], float(rect['width_m']),
+                          float(rect['height_m']), float(rect['blend_radius_m']))
+    out.write_text(yaml.safe_dump(path_spec(path), default_flow_style=None))
+    return out
+
+
+def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags, elapsed,
+                 rect_file=None):
     """Figures from the bags, plots, report.md and summary.json."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
+    from irb_description.path import load_path_file
     from irb_planning.plot import plot_plan
 
-    from .run_report import markdown_report, plot_runs, run_figures, saving_percent
+    from .run_report import (markdown_report, plot_runs, rectangle_section, run_figures,
+                             saving_percent)
     center, radius = np.array(cfg['center_m'], float), float(cfg['radius_m'])
-    figs = {k: run_figures(v, k, center, radius) for k, v in executed.items()}
+    rect = load_path_file(rect_file) if rect_file is not None else None
+    figs = {k: (run_figures(v, k, path=rect) if k.startswith('rect_')
+                else run_figures(v, k, center, radius)) for k, v in executed.items()}
     plots = plot_runs([figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff']],
                       out / 'plots')
     names = RobotModel.load().joint_names
@@ -346,9 +385,17 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
         if rej:
             notes.append(f'identification, {name}: {len(rej)} hold(s) rejected for a '
                          'stick-slip signature (identify.json, rejected_segments)')
+    sections = []
+    if 'rect_energy_ff' in figs and 'rect_trapezoid_ff' in figs:
+        rect_plots = plot_runs([figs['rect_energy_ff'], figs['rect_trapezoid_ff']],
+                               out / 'plots' / 'rectangle')
+        sections = rectangle_section(figs['rect_energy_ff'], figs['rect_trapezoid_ff'],
+                                     rect_plots, plans['rect_energy_ff'],
+                                     plans['rect_trapezoid_ff'], cfg['rectangle'], rect,
+                                     out / 'report.md')
     markdown_report(run_id, figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff'],
                     plots, rows, sorted(str(p) for p in (out / 'friction').glob('*.png')),
-                    plan_rows, str(plan_plot), bags, notes, out / 'report.md')
+                    plan_rows, str(plan_plot), bags, notes, out / 'report.md', sections)
     summary = {k: {'energy_j': f.energy, 'duration_s': f.duration,
                    'path_error_mean_mm': f.err_mean_mm, 'path_error_max_mm': f.err_max_mm,
                    'bag': f.bag} for k, f in figs.items()}
@@ -357,10 +404,19 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     summary['path_error_reduction_percent'] = 100 * (
         figs['energy_noff'].err_mean_mm - figs['energy_ff'].err_mean_mm) \
         / figs['energy_noff'].err_mean_mm
+    if 'rect_energy_ff' in figs and 'rect_trapezoid_ff' in figs:
+        summary['rectangle_energy_saving_percent'] = saving_percent(
+            figs['rect_energy_ff'].energy, figs['rect_trapezoid_ff'].energy)
     summary['elapsed_s'] = elapsed
     (out / 'summary.json').write_text(json.dumps(summary, indent=2))
-    for k in ('energy_saving_percent', 'path_error_reduction_percent'):
-        log(f'   {k}: {summary[k]:.1f}')
+    for k in ('energy_saving_percent', 'path_error_reduction_percent',
+              'rectangle_energy_saving_percent'):
+        if k in summary:
+            log(f'   {k}: {summary[k]:.1f}')
+    for k in ('rect_energy_ff', 'rect_trapezoid_ff'):
+        if k in figs:
+            log(f'   {k}: {figs[k].energy:.1f} J, path error mean {figs[k].err_mean_mm:.3f} '
+                f'mm, max {figs[k].err_max_mm:.3f} mm')
 
 
 if __name__ == '__main__':

@@ -25,3 +25,28 @@ def test_every_sweep_passes_the_controllers_plan_gate(model, speed):
         out = check_message_arrays(model.joint_names, t, q, qd, qdd, model, None,
                                    GateConfig(time_driven=True), model.friction)
         assert out['kind'] == 'time' and out['summary']['points'] == t.size
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('objective', ['energy', 'trapezoid'])
+def test_plans_on_the_gluing_rectangle_pass_the_plan_gate(model, objective):
+    """The planner's messages on a polyline with blends pass pdplus's gate theta-driven on that
+    path (its velocity/acceleration consistency rule refused the energy plan while a point sat
+    on a piece end, where the joint acceleration jumps, and while long intervals crossed a
+    tight blend), with stamps rounded to the message's nanoseconds."""
+    from irb_description.path import path_spec, rectangle_path
+    from irb_planning.planner import Planner, PlannerSettings, request_path
+    from irb_planning.request import PlanRequest
+    sp = path_spec(rectangle_path([0.7, 0.0, 0.3], [0.3, 0.1, 1.0], 0.3, 0.2, 0.025))
+    planner = Planner(model.copy(), PlannerSettings(grid_size=100))
+    r = planner.plan(PlanRequest(objective=objective, duration=6.0, path_type='polyline',
+                                 waypoints=np.array(sp['waypoints']),
+                                 blend_radii=np.array(sp['blend_radii']), closed=True))
+    tr = r.trajectory
+    t = np.round(tr['t'] * 1e9) / 1e9
+    out = check_message_arrays(model.joint_names, t, tr['q'], tr['qd'], tr['qdd'], model,
+                               request_path(r.request), GateConfig(), model.friction)
+    assert out['kind'] == 'path'
+    th = out['arrays']['theta']
+    assert th[0] == pytest.approx(0.0, abs=1e-6) and th[-1] == pytest.approx(2 * np.pi,
+                                                                               abs=1e-6)

@@ -26,6 +26,23 @@ def test_circle_error_and_saving():
     assert saving_percent(93.0, 100.0) == pytest.approx(7.0)
 
 
+def test_the_gluing_rectangle_file(tmp_path):
+    """The main job's rectangle: a closed blended polyline in the tilted plane, its length
+    the rounded rectangle's perimeter 2 (w + h) - 8 r + 2 pi r."""
+    import numpy as np
+    from irb_description.path import load_path_file
+
+    from irb_bringup.thesis_run import write_rectangle
+    rect = dict(center_m=[0.7, 0.0, 0.3], normal=[0.3, 0.1, 1.0], width_m=0.3, height_m=0.2,
+                blend_radius_m=0.025, duration_s=6.0)
+    path = load_path_file(write_rectangle(rect, tmp_path / 'r.yaml'))
+    assert path.closed
+    assert path.length == pytest.approx(2 * 0.5 - 8 * 0.025 + 2 * np.pi * 0.025, rel=1e-12)
+    n = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0])
+    pts = path.point(np.linspace(0, 2 * np.pi, 500))
+    np.testing.assert_allclose((pts - [0.7, 0.0, 0.3]) @ n, 0.0, atol=1e-15)
+
+
 def test_quick_pipeline_end_to_end(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     res = subprocess.run(['ros2', 'run', 'irb_bringup', 'thesis_run', '--quick',
@@ -37,17 +54,22 @@ def test_quick_pipeline_end_to_end(tmp_path):
     out = runs[0]
     report = (out / 'report.md').read_text()
     for heading in ('## Energy', '## Path accuracy', '## Identified friction', '## Planner',
-                    '## Bags'):
+                    '## Gluing contour', '## Bags'):
         assert heading in report
     for png in ('plots/power.png', 'plots/path_error.png', 'plots/torques_speeds.png',
                 'plots/plan.png'):
         assert (out / png).stat().st_size > 10_000, png
     s = json.loads((out / 'summary.json').read_text())
-    for run in ('energy_ff', 'trapezoid_ff', 'energy_noff'):
+    for run in ('energy_ff', 'trapezoid_ff', 'energy_noff', 'rect_energy_ff',
+                'rect_trapezoid_ff'):
         assert s[run]['energy_j'] > 0
         assert (tmp_path / 'bags' / f'{out.name}_{run}' / 'metadata.yaml').is_file()
         # each run is one lap of the planned duration (no second lap, no stall)
         assert s[run]['duration_s'] == pytest.approx(6.0, abs=0.5), (run, s[run])
+    # the gluing rectangle, followed by projection with the identified compensation
+    for run in ('rect_energy_ff', 'rect_trapezoid_ff'):
+        assert s[run]['path_error_mean_mm'] < 0.2, (run, s[run])
+    assert (out / 'plots' / 'rectangle' / 'path_error.png').stat().st_size > 10_000
     # friction compensation must cut the camera path error clearly (thesis: 25-50 %)
     assert s['path_error_reduction_percent'] > 25
     # equal duration, and the optimum is not worse than the baseline beyond tracking noise

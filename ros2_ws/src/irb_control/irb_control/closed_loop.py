@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from irb_description.friction import FrictionMap, load_friction_map
 from irb_description.model import RobotModel
-from irb_description.path import CirclePath, thesis_circle
+from irb_description.path import CirclePath, PathBase, thesis_circle
 
 from .pd_plus import MODE_HOLD, ControllerConfig, PdPlusController
 from .plant import Plant, PlantConfig, PlantFriction, default_plant_yaml, load_plant_friction
@@ -51,15 +51,15 @@ class ClosedLoopResult:
     energy: float
     events: list
     stop_reason: str
-    path: CirclePath | None = None
+    path: PathBase | None = None
     prediction_samples: int = 0
 
     def path_error_camera(self, t_from: float | None = None) -> np.ndarray:
-        """Distance (M,) [m] from each camera point to the nearest point of the circle path,
-        from ``t_from`` (default: start of the path motion) on."""
+        """Distance (M,) [m] from each camera point to the nearest point of the path (any
+        type), from ``t_from`` (default: start of the path motion) on."""
         t0 = self.path_start_time() if t_from is None else t_from
         sel = self.cam_t >= t0
-        return circle_distance(self.path, self.cam_p[sel])
+        return path_distance(self.path, self.cam_p[sel])
 
     def path_start_time(self) -> float:
         """Time [s] of the first sample in PATH/TIME mode (end of the ramp)."""
@@ -87,6 +87,14 @@ def circle_distance(path: CirclePath, p: np.ndarray) -> np.ndarray:
     p = np.asarray(p, float).reshape(-1, 3)
     rho = np.hypot(p[:, 0] - path.center[0], p[:, 1] - path.center[1])
     return np.hypot(rho - path.radius, p[:, 2] - path.center[2])
+
+
+def path_distance(path: PathBase, p: np.ndarray) -> np.ndarray:
+    """Distance (M,) [m] from points p (M, 3) to the nearest point of ``path``: the circle's
+    closed form for the thesis's CirclePath, the path's own projection otherwise."""
+    if type(path) is CirclePath:
+        return circle_distance(path, p)
+    return np.asarray(path.distance(np.asarray(p, float).reshape(-1, 3)), float)
 
 
 def polyline_distance(curve: np.ndarray, p: np.ndarray, chunk: int = 256) -> np.ndarray:
@@ -188,7 +196,7 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
                   plant_config: PlantConfig = PlantConfig(),
                   controller_config: ControllerConfig = ControllerConfig(),
                   plant_friction: PlantFriction | None = None,
-                  path: CirclePath | None = None) -> tuple[Plant, PdPlusController]:
+                  path: PathBase | None = None) -> tuple[Plant, PdPlusController]:
     """Plant (friction from config/plant.yaml) and controller on the thesis circle with the
     default polynomial profile of ``duration_s`` [s]."""
     model = model or RobotModel.load()

@@ -40,7 +40,8 @@ import numpy as np
 import pinocchio as pin
 from irb_description.friction import FrictionMap, JointFriction
 from irb_description.model import RobotModel
-from irb_description.path import CirclePath
+from irb_description.path import CirclePath, PathBase
+from irb_description.path_tracking import PathTracker
 
 from .profiles import PathProfile, TimeTrajectory
 
@@ -261,7 +262,7 @@ class PdPlusController:
     ``set_path_profile`` or ``set_time_trajectory`` (only while not moving).
     """
 
-    def __init__(self, model: RobotModel, path: CirclePath, config: ControllerConfig =
+    def __init__(self, model: RobotModel, path: PathBase, config: ControllerConfig =
                  ControllerConfig(), friction: FrictionMap | None = None):
         self.model = model.copy()
         self._pm, self._pd = self.model.model, self.model.data
@@ -298,6 +299,8 @@ class PdPlusController:
         self._two_pi = 2.0 * np.pi
         self._circle = ((float(path.center[0]), float(path.center[1]), path.direction,
                          path.start_angle) if type(path) is CirclePath else None)
+        # any other path: projection near the previous theta (irb_description.path_tracking)
+        self._tracker = PathTracker(path) if self._circle is None else None
         self._friction_par = _parametric_friction(friction)
 
     # --- commands ------------------------------------------------------------------------
@@ -516,11 +519,14 @@ class PdPlusController:
                              rejected_input=True)
 
     def _theta_of(self, q: np.ndarray) -> float:
-        """theta of FK(q) about the path centre: ``float(path.theta_of(model.fk(q)))``, for a
-        CirclePath in plain floats with numpy's arctan2 (the same value to the bit)."""
+        """theta of FK(q): for the thesis's CirclePath atan2 about the centre
+        (``float(path.theta_of(model.fk(q)))`` in plain floats with numpy's arctan2, the same
+        value to the bit); for any other path the projection of the TCP onto the path within
+        a window around the previous theta (``PathTracker``: continuous, never a jump to a
+        distant part of the path that passes nearby)."""
         c = self._circle
         if c is None:
-            return float(self.path.theta_of(self.model.fk(q)))
+            return self._tracker.update(self.model.fk(q), self._theta)
         cx, cy, direction, start = c
         x, y, _ = self.model.fk(q).tolist()
         ang = float(np.arctan2(y - cy, x - cx))

@@ -14,13 +14,14 @@ answered.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
 import numpy as np
 from irb_description.model import RobotModel
 from irb_description.node_main import declare, latched_qos, run_node, state_qos
-from irb_description.path import CirclePath
+from irb_description.path import CirclePath, load_path_file
 from irb_interfaces.msg import AxisStatus, ControllerState, PlanStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -76,6 +77,8 @@ class PdPlusNode(Node):
         par('path_radius', 0.15, 'circle radius [m]')
         par('path_start_angle', 0.0, 'circle start angle [rad]')
         par('path_direction', 1, 'circle direction: +1 counter-clockwise, -1 clockwise')
+        par('path_file', '', "YAML path spec (irb_description.path.path_from_spec: type line, "
+            "arc, polyline, spline, circle, ...); '' = the circle of the path_* parameters")
         par('auto_enable', True, 'at start-up only: start moving once a profile exists, the '
             'joint states have been steady for auto_enable_settle_s and torque_command has a '
             'subscriber (once; later motions need ~/enable)')
@@ -100,8 +103,12 @@ class PdPlusNode(Node):
         self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
         self.P = P
         self.model = RobotModel.load()
-        self.path = CirclePath(np.array(P['path_center'], float), P['path_radius'],
-                               P['path_start_angle'], int(P['path_direction']))
+        try:
+            self.path = (load_path_file(P['path_file']) if P['path_file'] else
+                         CirclePath(np.array(P['path_center'], float), P['path_radius'],
+                                    P['path_start_angle'], int(P['path_direction'])))
+        except ValueError as exc:
+            raise PathConfigError(str(exc)) from None
         tl = P['torque_limit_nm']
         cfg = ControllerConfig(
             kp=tuple(P['kp']), kd=tuple(P['kd']), period_s=P['period_s'],
@@ -163,7 +170,8 @@ class PdPlusNode(Node):
             topic=self.resolve_topic_name('planned_trajectory'),
             namespace=self.get_namespace(), path_center=tuple(P['path_center']),
             path_radius=P['path_radius'], path_start_angle=P['path_start_angle'],
-            path_direction=int(P['path_direction']), time_driven=self.time_driven,
+            path_direction=int(P['path_direction']), path_file=P['path_file'],
+            time_driven=self.time_driven,
             min_theta_dot=P['min_theta_dot'],
             velocity_limit_fraction=P['velocity_limit_fraction'],
             max_points=int(P['max_plan_points']),
@@ -443,9 +451,17 @@ def _joint_indices(names: tuple, joints: list[str]) -> tuple | None:
         return None
 
 
+class PathConfigError(ValueError):
+    """The configured path (path_file or the path_* circle) is not usable."""
+
+
 def main(args=None):
-    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
-             args)
+    try:
+        run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
+                 args)
+    except PathConfigError as exc:       # one line and exit 1, no traceback
+        print(f'pdplus: {exc}', file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == '__main__':

@@ -44,6 +44,7 @@ class GateConfig:
     path_radius: float = 0.15
     path_start_angle: float = 0.0
     path_direction: int = 1
+    path_file: str = ''               # YAML path spec; '' = the circle above
     time_driven: bool = False
     min_theta_dot: float = 0.05
     velocity_limit_fraction: float = 1.0
@@ -210,7 +211,7 @@ def main(argv=None) -> int:
     import rclpy
     from irb_description.model import RobotModel
     from irb_description.node_main import latched_qos
-    from irb_description.path import CirclePath
+    from irb_description.path import CirclePath, load_path_file
     from rclpy.executors import ExternalShutdownException
     from trajectory_msgs.msg import JointTrajectory
 
@@ -219,8 +220,9 @@ def main(argv=None) -> int:
     from .profiles import ProfileError
     rclpy.init(args=['--ros-args', *cfg.extra_ros_args], domain_id=cfg.domain_id)
     model = RobotModel.load()
-    path = CirclePath(np.array(cfg.path_center, float), cfg.path_radius, cfg.path_start_angle,
-                      int(cfg.path_direction))
+    path = (load_path_file(cfg.path_file) if cfg.path_file else
+            CirclePath(np.array(cfg.path_center, float), cfg.path_radius,
+                       cfg.path_start_angle, int(cfg.path_direction)))
     friction = controller_friction(model, cfg.friction_mode, cfg.friction_map_file)
     node = rclpy.create_node(cfg.node_name, namespace=cfg.namespace)
 

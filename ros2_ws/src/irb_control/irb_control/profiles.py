@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.path import CirclePath, joint_path
+from irb_description.path import CirclePath, PathBase, joint_path
 
 
 class ProfileError(ValueError):
@@ -210,7 +210,7 @@ def polynomial_theta_of_time(duration: float, n: int = 2001, theta_end: float = 
     return t, theta, theta_dot, theta_ddot
 
 
-def profile_from_theta_samples(model: RobotModel, path: CirclePath, theta: np.ndarray,
+def profile_from_theta_samples(model: RobotModel, path: PathBase, theta: np.ndarray,
                                theta_dot: np.ndarray, theta_ddot: np.ndarray,
                                t: np.ndarray | None = None, min_theta_dot: float = 0.05,
                                grid: int = 721) -> PathProfile:
@@ -240,30 +240,49 @@ def profile_from_theta_samples(model: RobotModel, path: CirclePath, theta: np.nd
     return PathProfile(th_u, thd, thdd, jp.q, qd, qdd, tt)
 
 
-def default_circle_profile(model: RobotModel, path: CirclePath, duration: float = 10.0,
+def default_circle_profile(model: RobotModel, path: PathBase, duration: float = 10.0,
                            min_theta_dot: float = 0.05, grid: int = 721) -> PathProfile:
     """The built-in default: one circle in ``duration`` [s] with the polynomial speed profile."""
     t, th, thd, thdd = polynomial_theta_of_time(duration)
     return profile_from_theta_samples(model, path, th, thd, thdd, t, min_theta_dot, grid)
 
 
-def profile_from_joint_trajectory(model: RobotModel, path: CirclePath, t: np.ndarray,
+def profile_from_joint_trajectory(model: RobotModel, path: PathBase, t: np.ndarray,
                                   q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                                   min_theta_dot: float = 0.05) -> PathProfile:
     """theta-profile from a joint trajectory (N,) / (N, 3) that follows ``path``.
 
-    theta = atan2 of FK(q) about the centre (unwrapped, from 0), theta_dot = p'(theta) . J qd
+    theta = atan2 of FK(q) about the centre (unwrapped, from 0; for any other path the
+    projection followed from the start, PathTracker), theta_dot = p'(theta) . J qd
     / |p'|^2; theta_ddot by differentiating theta_dot in time. The joint references are the
     trajectory's own; theta_dot is floored at ``min_theta_dot``.
     """
     t, q, qd, qdd = (np.asarray(a, float) for a in (t, q, qd, qdd))
     _check_finite('joint trajectory', t, q, qd, qdd)
     pts = np.array([model.fk(qi) for qi in q])
-    theta = np.unwrap(np.arctan2(pts[:, 1] - path.center[1], pts[:, 0] - path.center[0])
-                      * path.direction)
-    theta = theta - theta[0] + path.theta_of(pts[0])
-    if np.max(np.abs(np.linalg.norm((pts - path.point(theta))[:, :2], axis=1))) > 5e-3 or \
-            np.max(np.abs(pts[:, 2] - path.center[2])) > 5e-3:
+    if type(path) is CirclePath:
+        theta = np.unwrap(np.arctan2(pts[:, 1] - path.center[1], pts[:, 0] - path.center[0])
+                          * path.direction)
+        theta = theta - theta[0] + path.theta_of(pts[0])
+        off = max(np.max(np.abs(np.linalg.norm((pts - path.point(theta))[:, :2], axis=1))),
+                  np.max(np.abs(pts[:, 2] - path.center[2])))
+    else:       # any other path: followed point by point from the start (PathTracker)
+        from irb_description.path_tracking import PathTracker
+        step = float(np.max(np.linalg.norm(np.diff(pts, axis=0), axis=1))) if len(pts) > 1 \
+            else 0.0
+        tr = PathTracker(path, window_m=max(0.02, 3.0 * step))
+        theta = np.empty(len(pts))
+        prev = float(path.theta_of(pts[0]))
+        if path.closed and prev > np.pi:
+            prev = 0.0 if np.linalg.norm(path.point(0.0) - pts[0]) < 5e-3 else prev
+        for k, p in enumerate(pts):
+            prev = theta[k] = tr.update(p, prev)
+        if path.closed:
+            theta = np.unwrap(theta)
+            theta -= 2 * np.pi * np.round(theta[0] / (2 * np.pi))
+        off = float(np.max(np.linalg.norm(pts - path.point(np.clip(theta, 0, 2 * np.pi)),
+                                          axis=1)))
+    if off > 5e-3:
         raise ProfileError('joint trajectory does not follow the configured path (> 5 mm)')
     dp = path.d_point(theta)
     v = np.array([model.jacobian(qi) @ qdi for qi, qdi in zip(q, qd)])

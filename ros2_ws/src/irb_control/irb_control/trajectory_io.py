@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.path import CirclePath
+from irb_description.path import PathBase
 from irb_description.stamps import sec_nanosec
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -54,7 +54,7 @@ def _arrays(msg: JointTrajectory, idx: list[int]):
     return t, pos, vel, acc
 
 
-def profile_from_msg(msg: JointTrajectory, model: RobotModel, path: CirclePath,
+def profile_from_msg(msg: JointTrajectory, model: RobotModel, path: PathBase,
                      time_driven: bool, min_theta_dot: float = 0.05
                      ) -> PathProfile | TimeTrajectory:
     """The profile a JointTrajectory describes (see module docstring); ProfileError if bad."""

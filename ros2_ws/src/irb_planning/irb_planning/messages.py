@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from builtin_interfaces.msg import Duration
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Vector3
 from irb_description.stamps import sec_nanosec
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
@@ -31,15 +31,46 @@ def request_from_msg(msg: PlanPath.Request) -> PlanRequest:
         duration=msg.duration, time_weight=msg.time_weight,
         fourier_order=int(msg.fourier_order), grid_size=int(msg.grid_size),
         limit_scaling=msg.limit_scaling, friction_map=msg.friction_map,
-        boundary=msg.boundary, path_type=p.type or PathSpec.TYPE_CIRCLE)
+        boundary=msg.boundary, path_type=p.type or PathSpec.TYPE_CIRCLE,
+        normal=np.array([p.normal.x, p.normal.y, p.normal.z], float), sweep=p.sweep,
+        waypoints=np.array([[w.x, w.y, w.z] for w in p.waypoints], float).reshape(-1, 3),
+        blend_radii=np.asarray(p.blend_radii, float), closed=bool(p.closed))
 
 
 def path_msg(req: PlanRequest) -> PathSpec:
-    """The request's circle as a PathSpec."""
+    """The request's path as a PathSpec."""
     c = np.asarray(req.center, float)
+    n = np.asarray(req.normal, float)
     return PathSpec(type=req.path_type, center=Point(x=c[0], y=c[1], z=c[2]),
                     radius=float(req.radius), start_angle=float(req.start_angle),
-                    direction=int(req.direction))
+                    direction=int(req.direction), normal=Vector3(x=n[0], y=n[1], z=n[2]),
+                    sweep=float(req.sweep),
+                    waypoints=[Point(x=float(w[0]), y=float(w[1]), z=float(w[2]))
+                               for w in np.asarray(req.waypoints, float).reshape(-1, 3)],
+                    blend_radii=np.atleast_1d(np.asarray(req.blend_radii, float)).tolist(),
+                    closed=bool(req.closed))
+
+
+def path_msg_from_spec(spec: dict) -> PathSpec:
+    """A PathSpec from the plain mapping of a path YAML file (``irb_description.path``'s
+    ``path_from_spec`` keys: type, center, radius, start_angle, direction, normal, sweep,
+    waypoints, blend_radii, closed). ValueError if the mapping is not a valid path."""
+    from irb_description.path import path_from_spec
+    path_from_spec(spec)                                 # the same checks as the planner
+    c = [float(x) for x in spec.get('center', [0.0, 0.0, 0.0])]
+    n = [float(x) for x in spec.get('normal', [0.0, 0.0, 0.0])]
+    br = spec.get('blend_radii', [])
+    return PathSpec(type=spec.get('type', 'circle') or 'circle',
+                    center=Point(x=c[0], y=c[1], z=c[2]),
+                    radius=float(spec.get('radius', 0.0)),
+                    start_angle=float(spec.get('start_angle', 0.0)),
+                    direction=int(spec.get('direction', 1)),
+                    normal=Vector3(x=n[0], y=n[1], z=n[2]),
+                    sweep=float(spec.get('sweep', 0.0)),
+                    waypoints=[Point(x=float(w[0]), y=float(w[1]), z=float(w[2]))
+                               for w in spec.get('waypoints', [])],
+                    blend_radii=[float(x) for x in np.atleast_1d(br)],
+                    closed=bool(spec.get('closed', False)))
 
 
 def _duration(t: float) -> Duration:

@@ -1,6 +1,16 @@
 """`ros2 run irb_planning plan`: call the plan_path service, print a summary, write a plot.
 
     ros2 run irb_planning plan --duration 10 [--objective energy] [--plot plan.png]
+    ros2 run irb_planning plan --path-file rectangle.yaml --duration 6
+
+``--path-file``: a YAML mapping of a path (irb_description.path.path_from_spec), e.g.
+
+    type: polyline
+    waypoints: [[0.55, -0.15, 0.25], [0.85, -0.15, 0.3], [0.85, 0.15, 0.3]]
+    blend_radii: [0.03]
+    closed: false
+
+(types circle, arc, line, polyline, spline; the circle options are used without it).
 
 Exit code 0 on success, 1 if the planner refused (its error code and message are printed),
 2 if the service did not answer.
@@ -17,6 +27,7 @@ from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from rclpy.executors import SingleThreadedExecutor
 
+from .messages import path_msg_from_spec
 from .plot import plot_plan
 
 
@@ -27,6 +38,8 @@ def parse_args(argv):
     p.add_argument('--radius', type=float, default=0.15, help='[m]')
     p.add_argument('--start-angle', type=float, default=0.0, help='[rad]')
     p.add_argument('--direction', type=int, default=1, choices=(1, -1))
+    p.add_argument('--path-file', default='',
+                   help='YAML path spec (type, waypoints, ...); replaces the circle options')
     p.add_argument('--objective', default='energy',
                    help='energy | time | trapezoid | fourier')
     p.add_argument('--duration', type=float, default=10.0, help='[s], 0 = free')
@@ -42,11 +55,30 @@ def parse_args(argv):
     return p.parse_args(argv)
 
 
+def read_path_file(name: str) -> PathSpec:
+    """PathSpec from a YAML path file; ValueError with one line saying why not."""
+    import yaml
+    try:
+        with open(name) as f:
+            spec = yaml.safe_load(f)
+    except OSError as exc:
+        raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'path file {name} is not YAML: {str(exc).splitlines()[0]}') from None
+    try:
+        return path_msg_from_spec(spec)
+    except (ValueError, TypeError, IndexError) as exc:
+        raise ValueError(f'path file {name}: {exc}') from None
+
+
 def build_request(a) -> PlanPath.Request:
     req = PlanPath.Request()
-    req.path = PathSpec(type=PathSpec.TYPE_CIRCLE, center=Point(x=a.center[0], y=a.center[1],
-                                                                z=a.center[2]),
-                        radius=a.radius, start_angle=a.start_angle, direction=a.direction)
+    if a.path_file:
+        req.path = read_path_file(a.path_file)
+    else:
+        req.path = PathSpec(type=PathSpec.TYPE_CIRCLE,
+                            center=Point(x=a.center[0], y=a.center[1], z=a.center[2]),
+                            radius=a.radius, start_angle=a.start_angle, direction=a.direction)
     req.objective, req.duration, req.time_weight = a.objective, a.duration, a.time_weight
     req.fourier_order = a.order if a.objective == 'fourier' else 0
     req.grid_size, req.limit_scaling = a.grid, a.limit_scaling
@@ -74,6 +106,11 @@ def summary(resp: PlanPath.Response) -> str:
 def main(args=None):
     argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
     a = parse_args(argv)
+    try:
+        request = build_request(a)
+    except ValueError as exc:
+        print(f'plan: {exc}', file=sys.stderr)
+        return 1
     rclpy.init(args=args)
     node = rclpy.create_node('plan_cli')
     executor = SingleThreadedExecutor()
@@ -84,7 +121,7 @@ def main(args=None):
         if not client.wait_for_service(timeout_sec=min(a.timeout, 30.0)):
             print(f'service {a.service} not available', file=sys.stderr)
             return 2
-        future = client.call_async(build_request(a))
+        future = client.call_async(request)
         executor.spin_until_future_complete(future, timeout_sec=a.timeout)
         if not future.done():
             print(f'no answer within {a.timeout} s', file=sys.stderr)

@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from irb_description.path import path_from_spec
 
 from .fourier import ORDERS
 from .transcription import BOUNDARIES, BOUNDARY_PERIODIC, BOUNDARY_REST
@@ -26,6 +27,15 @@ OBJECTIVE_FOURIER = 'fourier'
 OBJECTIVES = (OBJECTIVE_ENERGY, OBJECTIVE_TIME, OBJECTIVE_TRAPEZOID, OBJECTIVE_FOURIER)
 
 PATH_CIRCLE = 'circle'
+PATH_ARC = 'arc'
+PATH_LINE = 'line'
+PATH_POLYLINE = 'polyline'
+PATH_SPLINE = 'spline'
+PATH_TYPES = (PATH_CIRCLE, PATH_ARC, PATH_LINE, PATH_POLYLINE, PATH_SPLINE)
+#: most waypoints a request may carry
+MAX_WAYPOINTS = 200
+#: shortest path [m] (shorter: the TCP barely moves, theta is ill-defined for the controller)
+MIN_PATH_LENGTH = 0.005
 MIN_GRID = 20
 #: smallest fraction of the speed/torque limits a request may ask for
 MIN_LIMIT_SCALING = 0.01
@@ -52,6 +62,11 @@ class PlanRequest:
     objective one of OBJECTIVES; duration [s] (0 = free); time_weight [J/s]; fourier_order 3/5/7;
     grid_size (0 = planner default); limit_scaling (0 = 1.0) in (0, 1]; friction_map path
     ('' = nominal); boundary 'rest' (default, '') or 'periodic'.
+
+    path_type one of PATH_TYPES (irb_description.path): 'circle' uses center, radius,
+    start_angle, direction; 'arc' center, normal (3,), radius, start_angle, sweep [rad]
+    (0 = 2 pi, a full circle); 'line' waypoints (2, 3) [m]; 'polyline' waypoints (K, 3),
+    blend_radii [m] (one, or one per corner), closed; 'spline' waypoints, closed.
     """
 
     center: np.ndarray = field(default_factory=lambda: np.array([0.6, 0.0, 0.13]))
@@ -67,13 +82,43 @@ class PlanRequest:
     friction_map: str = ''
     boundary: str = ''
     path_type: str = PATH_CIRCLE
+    normal: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sweep: float = 0.0
+    waypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    blend_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    closed: bool = False
 
     @property
     def path_key(self) -> tuple:
         """Hashable identity of the geometric path."""
-        return (self.path_type, *np.round(np.asarray(self.center, float), 12).tolist(),
-                round(float(self.radius), 12), round(float(self.start_angle), 12),
-                int(self.direction))
+        if self.path_type == PATH_CIRCLE:
+            return (self.path_type, *np.round(np.asarray(self.center, float), 12).tolist(),
+                    round(float(self.radius), 12), round(float(self.start_angle), 12),
+                    int(self.direction))
+        r = lambda x: tuple(np.round(np.asarray(x, float), 12).ravel().tolist())  # noqa: E731
+        if self.path_type == PATH_ARC:
+            return (self.path_type, r(self.center), r(self.normal), r(self.radius),
+                    r(self.start_angle), r(self.sweep))
+        return (self.path_type, r(self.waypoints), r(self.blend_radii), bool(self.closed))
+
+    def path_spec(self) -> dict:
+        """The path as the plain mapping of ``irb_description.path.path_from_spec``."""
+        t = self.path_type
+        if t == PATH_CIRCLE:
+            return dict(type=t, center=np.asarray(self.center, float).tolist(),
+                        radius=float(self.radius), start_angle=float(self.start_angle),
+                        direction=int(self.direction))
+        if t == PATH_ARC:
+            return dict(type=t, center=np.asarray(self.center, float).tolist(),
+                        normal=np.asarray(self.normal, float).tolist(),
+                        radius=float(self.radius), start_angle=float(self.start_angle),
+                        sweep=float(self.sweep) or 2 * math.pi)
+        spec = dict(type=t, waypoints=np.asarray(self.waypoints, float).tolist())
+        if t == PATH_POLYLINE:
+            spec['blend_radii'] = np.atleast_1d(np.asarray(self.blend_radii, float)).tolist()
+        if t in (PATH_POLYLINE, PATH_SPLINE):
+            spec['closed'] = bool(self.closed)
+        return spec
 
 
 def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanRequest:
@@ -82,24 +127,50 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
     def bad(msg):
         raise PlanError(ERROR_INVALID_REQUEST, msg)
 
-    numbers = {'center': req.center, 'radius': req.radius, 'start_angle': req.start_angle,
-               'duration': req.duration, 'time_weight': req.time_weight,
+    if req.path_type not in PATH_TYPES:
+        bad(f'path type {req.path_type!r} unknown; one of {list(PATH_TYPES)}')
+    circle = req.path_type in (PATH_CIRCLE, PATH_ARC)
+    numbers = {'duration': req.duration, 'time_weight': req.time_weight,
                'limit_scaling': req.limit_scaling}
+    if circle:
+        numbers.update(center=req.center, radius=req.radius, start_angle=req.start_angle)
+    if req.path_type == PATH_ARC:
+        numbers.update(normal=req.normal, sweep=req.sweep)
+    if not circle:
+        numbers.update(waypoints=req.waypoints, blend_radii=req.blend_radii)
     for name, value in numbers.items():
-        arr = np.asarray(value, float)
+        try:
+            arr = np.asarray(value, float)
+        except (TypeError, ValueError):
+            bad(f'{name} must be numbers')
         if not np.all(np.isfinite(arr)):
             bad(f'{name} is not finite: {arr.tolist()}')
-    if np.asarray(req.center).shape != (3,):
-        bad('center must have 3 coordinates')
-    if req.path_type != PATH_CIRCLE:
-        bad(f"path type {req.path_type!r} unknown (only 'circle')")
-    if np.any(np.abs(np.asarray(req.center, float)) > MAX_COORDINATE):
-        bad(f'center coordinates must be within +-{MAX_COORDINATE:g} m')
-    if not RADIUS_RANGE[0] <= req.radius <= RADIUS_RANGE[1]:
-        bad(f'radius must be in [{RADIUS_RANGE[0]:g}, {RADIUS_RANGE[1]:g}] m, got {req.radius}')
     direction = req.direction
-    if direction not in (1, -1):
+    if circle:
+        if np.asarray(req.center).shape != (3,):
+            bad('center must have 3 coordinates')
+        if np.any(np.abs(np.asarray(req.center, float)) > MAX_COORDINATE):
+            bad(f'center coordinates must be within +-{MAX_COORDINATE:g} m')
+        if not RADIUS_RANGE[0] <= req.radius <= RADIUS_RANGE[1]:
+            bad(f'radius must be in [{RADIUS_RANGE[0]:g}, {RADIUS_RANGE[1]:g}] m, '
+                f'got {req.radius}')
+    if req.path_type == PATH_CIRCLE and direction not in (1, -1):
         bad(f'direction must be +1 (counter-clockwise) or -1 (clockwise), got {req.direction}')
+    if not circle:
+        w = np.asarray(req.waypoints, float)
+        if w.ndim != 2 or w.shape[1] != 3:
+            bad('waypoints must be a list of [x, y, z] points')
+        if w.shape[0] > MAX_WAYPOINTS:
+            bad(f'at most {MAX_WAYPOINTS} waypoints, got {w.shape[0]}')
+        if np.any(np.abs(w) > MAX_COORDINATE):
+            bad(f'waypoint coordinates must be within +-{MAX_COORDINATE:g} m')
+    try:
+        path = path_from_spec(replace(req, direction=direction if direction in (1, -1)
+                                      else 1).path_spec())
+    except ValueError as exc:
+        bad(f'path: {exc}')
+    if path.length < MIN_PATH_LENGTH:
+        bad(f'path length {path.length * 1e3:.2f} mm is below {MIN_PATH_LENGTH * 1e3:g} mm')
     if req.objective not in OBJECTIVES:
         bad(f'unknown objective {req.objective!r}; one of {list(OBJECTIVES)}')
     if req.duration < 0:
@@ -127,6 +198,9 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
         boundary = BOUNDARY_PERIODIC
     if boundary not in BOUNDARIES:
         bad(f'unknown boundary {req.boundary!r}; one of {list(BOUNDARIES)}')
+    if boundary == BOUNDARY_PERIODIC and not path.closed:
+        bad(f'a periodic profile (boundary periodic, or the Fourier profile) needs a closed '
+            f'path; this {req.path_type} is open')
     if not math.isfinite(req.duration):
         bad('duration is not finite')
     # the angle of the start point, reduced exactly (fmod is exact in floating point): a huge
@@ -135,4 +209,7 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
     start = start + 2 * math.pi if start < 0 else start
     return replace(req, center=np.asarray(req.center, float), direction=int(direction),
                    start_angle=start, grid_size=grid, limit_scaling=scaling,
-                   boundary=boundary)
+                   boundary=boundary, normal=np.asarray(req.normal, float),
+                   sweep=float(req.sweep), waypoints=np.asarray(req.waypoints, float),
+                   blend_radii=np.atleast_1d(np.asarray(req.blend_radii, float)),
+                   closed=bool(req.closed))

@@ -88,7 +88,11 @@ class Transcription:
 
     def __init__(self, nodes: PathDynamics, mids: PathDynamics, friction: Callable,
                  boundary: str = BOUNDARY_REST, abs_smoothing: float = 0.0,
-                 max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True):
+                 max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True,
+                 sides: tuple | None = None):
+        """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
+        nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
+        there, Phi'' is not). Their torques get rows too, so the limits hold on both sides."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -182,6 +186,14 @@ class Transcription:
                   ca.vec(tau_m), rev_rows, dip_rows]
         if use_epi:
             g_rows += [y - e_pos + e_neg]            # = 0
+        self._n_side = 0
+        if sides is not None and len(sides[0]):
+            idx, sd = np.asarray(sides[0], int), sides[1]
+            a_s, b_s = a[idx.tolist()], b[idx.tolist()]
+            tau_s = (ca.DM(sd.m.T) * rep(a_s) + ca.DM(sd.c.T) * rep(b_s) + ca.DM(sd.g.T)
+                     + friction(ca.DM(sd.dq.T) * rep(ca.sqrt(b_s))))
+            g_rows += [ca.vec(tau_s)]                # |tau| <= limit on the other side too
+            self._n_side = idx.size
         g = ca.vertcat(*g_rows)
         self._rows = np.cumsum([0] + [r.numel() for r in g_rows])
 
@@ -238,6 +250,9 @@ class Transcription:
         if self._ne:
             lbg += [np.zeros(self._ne // 2)]
             ubg += [np.zeros(self._ne // 2)]
+        if self._n_side:
+            lbg += [-np.tile(tau_lim, self._n_side)]
+            ubg += [np.tile(tau_lim, self._n_side)]
         return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
 
     def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
