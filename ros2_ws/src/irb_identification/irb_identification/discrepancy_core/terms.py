@@ -192,7 +192,7 @@ def build_term(name: str, P: Pooled, B: Blocks, e: dict, fitrow: dict, grids: Gr
         key = SHARED_SCALE[name]
         grid = list(getattr(grids, key))
         if name == 'viscous_temperature_drift':
-            grid = [g for g in grid if g <= record_s] or [min(grid)]
+            grid = [g for g in grid if g <= 2 * record_s] or [min(grid)]
 
         def make(s):
             cols = {}
@@ -223,8 +223,15 @@ def build_term(name: str, P: Pooled, B: Blocks, e: dict, fitrow: dict, grids: Gr
             return None
         off = 0 if name == 'inertial_link2' else 4
         cols = {(TORQUE, j): P.inertial[B.rows[(TORQUE, j)], j, off:off + 4] for j in tq}
-        t = Term(name, kind, tq, cols, [f'{name}.{x}' for x in INERTIAL_LABELS])
-        t.groups = {'all': [0, 1, 2, 3]}
+        # parameters the motion cannot see (e.g. link 2's first moment along its own axis)
+        # are left out: column norm below 1e-4 of the largest (noise-weighted)
+        nrm = np.sqrt(sum(np.sum(X**2, axis=0) / B.floor[cb] ** 2 for cb, X in cols.items()))
+        keep = np.flatnonzero(nrm > 1e-4 * nrm.max()) if nrm.max() > 0 else []
+        if len(keep) == 0:
+            return None
+        cols = {cb: X[:, keep] for cb, X in cols.items()}
+        t = Term(name, kind, tq, cols, [f'{name}.{INERTIAL_LABELS[i]}' for i in keep])
+        t.groups = {'all': list(range(len(keep)))}
         return t
     if name == 'encoder_scale':
         cols = {}
