@@ -10,8 +10,8 @@ weighted sum of small matrices and a refit costs one small solve.
 Step i, with the set S already selected (jointly refitted on the fit part):
 
 * every block gets ONE effective sample size n_eff,cb = n_cb / tau_cb, tau_cb the integrated
-  autocorrelation time of the current residual of that block, shared by all candidates of the
-  step (scores are comparable);
+  autocorrelation time of the residual that S and all candidates of the step leave together
+  (what nothing explains, ~ the noise), shared by all candidates (scores are comparable);
 * each candidate's joints: parameter groups (joints) whose own dBIC is negative;
 * score dBIC_c = sum_cb n_eff,cb ln(RSS_cb(S + c) / RSS_cb(S)) + k_c ln(n_eff of its blocks),
   k_c = parameters + profiled scales, RSS from the JOINT refit of S + c;
@@ -181,20 +181,28 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
     e = {cb: e0[cb].copy() for cb in B.keys}
     n_eff_last = {}
     while len(S) < decision.max_terms:
-        # one effective sample size per block for the whole step
-        tau = {}
-        for cb in B.keys:
-            r = e[cb][fitrow[cb]]
-            if cb[0] == TCP:
-                r3 = r.reshape(-1, 3)
-                tau[cb] = float(np.mean([tau_int(r3[:, i]) for i in range(3)]))
-            else:
-                tau[cb] = tau_int(r)
         cands = make_candidates(e, fitrow, {t.key() for t in S})
         terms = S + cands
         st = Stats(B, e0, terms)
         w_fit = fitmask_tb.astype(float)
         W = st.weighted(w_fit)
+        # one effective sample size per block for the whole step: tau_int of the residual
+        # left by ALL terms of the step together (S and every candidate), i.e. of what no
+        # candidate explains -- the same n_eff for every candidate
+        A_all = list(range(st.p))
+        b_all = st.unscale(A_all, st.solve(W, A_all))
+        r_all = {cb: e0[cb].copy() for cb in B.keys}
+        for t, off in zip(terms, st.offsets):
+            for cb, c in _term_contrib(t, b_all[off]).items():
+                r_all[cb] = r_all[cb] - c
+        tau = {}
+        for cb in B.keys:
+            r = r_all[cb][fitrow[cb]]
+            if cb[0] == TCP:
+                r3 = r.reshape(-1, 3)
+                tau[cb] = float(np.mean([tau_int(r3[:, i]) for i in range(3)]))
+            else:
+                tau[cb] = tau_int(r)
         nS = sum(t.p for t in S)
         A_S = list(range(nS))
 
@@ -275,7 +283,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
                     row['eligible'] = True
                     eligible.append((d, ci, tc, A_c, k, cbs_c, row))
                 break
-        table.sort(key=lambda r: r['delta_bic'])
+        table.sort(key=lambda r: (not r['eligible'], r['delta_bic']))
         if not eligible:
             steps.append(Step(None, table, {'none': decision.n_boot}, 1.0,
                               stop_reason='no candidate passes'))

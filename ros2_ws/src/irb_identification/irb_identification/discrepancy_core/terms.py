@@ -200,7 +200,7 @@ def build_term(name: str, P: Pooled, B: Blocks, e: dict, fitrow: dict, grids: Gr
                 U = payload_unit_torque_cached(P, s)
                 for j in tq:
                     cols[(TORQUE, j)] = U[B.rows[(TORQUE, j)], j][:, None]
-                return cols, ['payload_mass_kg'], {j: [0] for j in tq}
+                return cols, ['payload_mass_kg'], {'all': [0]}
             for i, j in enumerate(joints):
                 X = np.zeros((len(B.rows[(TORQUE, j)]), len(joints)))
                 X[:, i] = _per_joint_torque_cols(name, P, B, j, s)[:, 0]

@@ -392,10 +392,10 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
             P.r_cmd = P.r_cmd - pred
     floors = _floors(config, P)
     B = make_blocks(P, floors)
-    if not B.keys:
+    if not any(cb[0] == TORQUE for cb in B.keys):
         raise ValueError('no usable samples: no joint moves faster than v_min '
-                         f'{config.residual.v_min} rad/s long enough, no camera or command '
-                         'samples')
+                         f'{config.residual.v_min} rad/s for long enough (at rest friction '
+                         'is indeterminate); record motion (excite) first')
     fit_all = {cb: np.ones(len(B.rows[cb]), bool) for cb in B.keys}
     for name, params in known_errors.items():
         t = build_term(name, P, B, B.y, fit_all, config.grids)
