@@ -157,6 +157,7 @@ class ForwardResult:
     per_term: dict                    # term key -> cb -> contribution array
     flags: dict = field(default_factory=dict)
     n_eff: dict = field(default_factory=dict)
+    boot: dict = field(default_factory=dict)      # term key -> (R, p) bootstrap values
 
 
 def _term_contrib(t: Term, beta: np.ndarray) -> dict:
@@ -339,6 +340,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         e = _refit(B, e0, S, fit_tb)
     # final joint fit and bootstrap intervals
     beta, ci, contrib, per_term = {}, {}, {cb: np.zeros(len(B.rows[cb])) for cb in B.keys}, {}
+    boot = {}
     if S:
         st = Stats(B, e0, S)
         A = list(range(st.p))
@@ -356,11 +358,12 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
             if len(boots):
                 lo, hi = np.percentile(boots[:, off], [2.5, 97.5], axis=0)
                 ci[t.key()] = (lo, hi)
+                boot[t.key()] = boots[:, off]
             c = _term_contrib(t, bu[off])
             per_term[t.key()] = c
             for cb, v in c.items():
                 contrib[cb] = contrib[cb] + v
-    return ForwardResult(S, beta, ci, steps, contrib, per_term, flags, n_eff_last)
+    return ForwardResult(S, beta, ci, steps, contrib, per_term, flags, n_eff_last, boot)
 
 
 def _refit(B, e0, S, fit_tb):

@@ -22,11 +22,12 @@ from irb_control.plant_effects import PlantEffects, load_plant_effects, save_eff
 from irb_description.friction import load_friction_map
 
 from .bagdata import read_run
-from irb_control.plant_effects import EFFECT_NAMES
+from irb_control.plant_effects import EFFECT_NAMES, effect_to_dict
 
 from .forward import Decision, forward_select
 from .library import INERTIAL_LINKS, TCP, TORQUE, Grids, contribution, pool, to_block
 from .residuals import ResidualConfig, prepare_run
+from .selection import GRID_SCALES
 from .terms import MODEL_ERRORS, build_term, make_blocks
 
 
@@ -492,7 +493,26 @@ def _updated_model(fr, known, model_yaml, known_errors):
     return effects, friction_yaml, errors
 
 
-def _params_of(t, v, ci) -> dict:
+def _params_of(t, v, ci, boot=None) -> dict:
+    """Parameters of a named term: for a physical effect (or a refit) its irb_control block
+    fields (value, bootstrap 95 % interval of the mapped value; grid scales without), for a
+    model error the fitted coefficients by label."""
+    if t.kind in ('effect', 'refit'):
+        def block(vals):
+            if t.kind == 'refit':
+                return effect_to_dict(_combine_refit(t.name, t.known, t, vals))
+            return effect_to_dict(to_block(t.name, term_coef(t, vals), dict(t.scales)))
+        d = block(v)
+        bs = [block(b) for b in boot] if boot is not None and len(boot) else []
+        out = {}
+        for k, val in d.items():
+            if k in GRID_SCALES or not bs:
+                out[k] = {'value': val, 'ci95': None, 'profiled_on_grid': k in GRID_SCALES}
+                continue
+            arr = np.array([b[k] for b in bs], float)
+            lo, hi = np.percentile(arr, [2.5, 97.5], axis=0)
+            out[k] = {'value': val, 'ci95': [np.asarray(lo).tolist(), np.asarray(hi).tolist()]}
+        return out
     out = {}
     for i, lab in enumerate(t.labels):
         item = {'value': float(v[i])}
@@ -541,7 +561,8 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
             'joints': [j + 1 for j in t.joints], 'channel': t.channel,
             'delta_bic': row['delta_bic'], 'heldout_delta_bic': st.heldout_delta,
             'confidence': st.support, 'share_of_explained': max(shares[i], 0.0) / tot,
-            'parameters': _params_of(t, fr.beta[t.key()], fr.ci.get(t.key())),
+            'parameters': _params_of(t, fr.beta[t.key()], fr.ci.get(t.key()),
+                                     fr.boot.get(t.key())),
             'flags': fr.flags.get(t.key(), [])})
     loc = localise_blocks(B, e_after, hold_rows, P, B.floor, config.speed_bins,
                           config.unexplained_ratio)
