@@ -8,8 +8,9 @@ all with effort noise.
 
 Every case simulates the plan on irb_control's plant (closed loop with the PD+), with the
 hidden truth below, the drive's effort reported with noise (white 0.2 N m + coloured 0.1 N m
-with 50 ms correlation + 0.005 N m quantisation), writes the bags and runs the workflow
-against the nominal model (the plant's friction map, no effects). Groups:
+with 50 ms correlation + 0.005 N m quantisation), and runs the workflow on the logged runs
+(in memory: the bag round trip is tested in test_discrepancy.py) against the nominal model
+(the plant's friction map, no effects). Groups:
 
 * ``single``: each effect of irb_control.plant_effects on each joint where it applies (the
   others zero; payload_mass and time_delay act on all joints) at size x its moderate size
@@ -93,8 +94,7 @@ def simulate(c, model, fm, plant_yaml, plans, noise, tmp):
     import yaml
     from irb_control.plant_effects import PlantEffects, moderate_effect
     from irb_identification.discrepancy_core.excitation import (SensorErrors,
-                                                                perturbed_model, run_plan,
-                                                                write_runs)
+                                                                perturbed_model, run_plan)
     plan = plans[c['plan']]
     kw = {'effort_noise': noise}
     fx = None
@@ -144,7 +144,7 @@ def simulate(c, model, fm, plant_yaml, plans, noise, tmp):
         for r in runs:
             r.data.effort = r.data.effort + np.column_stack([
                 0 * r.data.t, 2.0 * np.sin(2 * np.pi * 7.0 * r.data.t), 0 * r.data.t])
-    return write_runs(runs, Path(tmp) / 'bags', model.joint_names), model_file
+    return [r.data for r in runs], model_file
 
 
 def judge(c, rep):
@@ -232,14 +232,15 @@ def main(args=None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
             try:
-                bags, model_file = simulate(c, model, fm, plant_yaml, plans, noise, tmp)
+                runs, model_file = simulate(c, model, fm, plant_yaml, plans, noise, tmp)
             except RuntimeError as exc:        # the PD+ safe-stopped (effect too large)
                 row.update(error=str(exc), correct=False)
                 rows.append(row)
                 print(f'[{i + 1}/{len(todo)}] {c} excitation failed: {exc}', flush=True)
                 continue
             t1 = time.perf_counter()
-            rep = run_workflow(bags, model_file, config, model=model).report
+            rep = run_workflow([r.name for r in runs], model_file, config, model=model,
+                               runs=runs).report
             t2 = time.perf_counter()
         row.update(judge(c, rep), simulate_s=t1 - t0, workflow_s=t2 - t1)
         rows.append(row)

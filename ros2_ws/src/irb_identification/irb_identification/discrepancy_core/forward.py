@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .library import TCP, TORQUE
+from .library import TCP
 from .selection import tau_int
 from .terms import Blocks, Term, restrict
 
@@ -145,6 +145,8 @@ class Step:
     support: float
     heldout_delta: float | None = None
     stop_reason: str = ''
+    best: str | None = None
+    aliases: list = field(default_factory=list)
 
 
 @dataclass
@@ -210,10 +212,11 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         def neff(Wd):
             return {cb: Wd[cb][3] / tau[cb] for cb in B.keys}
 
-        def score(Wd, A_c, k, cbs_c, base_rss=None):
+        def score(Wd, A_c, k, cbs_c, base_rss=None, A_base=None):
             ne = neff(Wd)
-            r0 = base_rss if base_rss is not None else st.rss(Wd, A_S, st.solve(Wd, A_S))
-            A = A_S + A_c
+            A_b = A_S if A_base is None else A_base
+            r0 = base_rss if base_rss is not None else st.rss(Wd, A_b, st.solve(Wd, A_b))
+            A = A_b + A_c
             b = st.solve(Wd, A)
             r1 = st.rss(Wd, A, b)
             d = sum(ne[cb] * np.log(r1[cb] / r0[cb]) for cb in B.keys)
@@ -301,6 +304,15 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
             A = A_S + A_c
             r1h = st.rss(Wh, A, st.solve(W, A))
             heldout = float(sum(ne_h[cb] * np.log(r1h[cb] / r0h[cb]) for cb in B.keys))
+        # aliases: eligible candidates that explain nothing more once the best one is in
+        # (e.g. joint-1 armature and link 2's mass at its axis): a replicate won by an alias
+        # supports the same explanation; they are reported with it
+        aliases = []
+        for d_, ci_, tc_, A_c_, k_, cbs_, row_ in eligible[1:]:
+            A_best = A_S + A_c
+            if score(W, A_c_, k_, cbs_, None, A_best)[0] >= -decision.bic_threshold:
+                aliases.append(tc_.key())
+        row['aliases'] = aliases
         # bootstrap of the step's decision
         wins = {}
         fit_idx = np.flatnonzero(fitmask_tb)
@@ -315,10 +327,10 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
                 if db < best[1]:
                     best = (tc_.key(), db)
             wins[best[0]] = wins.get(best[0], 0) + 1
-        support = wins.get(tc.key(), 0) / max(decision.n_boot, 1)
+        support = sum(wins.get(k, 0) for k in [tc.key()] + aliases) / max(decision.n_boot, 1)
         for r in table:
             r['bootstrap_wins'] = wins.get(r['effect'], 0) / max(decision.n_boot, 1)
-        step = Step(tc.key(), table, wins, support, heldout)
+        step = Step(tc.key(), table, wins, support, heldout, best=tc.key(), aliases=aliases)
         if heldout is not None and heldout >= -decision.heldout_threshold:
             step.added, step.stop_reason = None, (
                 f'{tc.key()}: held-out dBIC {heldout:.1f} not below '
@@ -379,5 +391,3 @@ def _refit(B, e0, S, fit_tb):
             e[cb] = e[cb] - c
     return e
 
-
-__all__ = ['Decision', 'ForwardResult', 'Stats', 'Step', 'forward_select', 'TORQUE']

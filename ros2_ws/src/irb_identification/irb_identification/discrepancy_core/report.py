@@ -130,6 +130,8 @@ def answer_line(report: dict) -> str:
     if report['effects']:
         parts = [f"{n['effect'] if n['kind'] != 'refit' else 'refit of ' + n['effect']} "
                  f"(joints {n['joints']}, confidence {n['confidence']:.2f}, "
+                 + (f"indistinguishable here from {n['indistinguishable_from']}, "
+                    if n.get('indistinguishable_from') else '') +
                  f"{100 * n['share_of_explained']:.0f} % of the explained residual)"
                  for n in report['effects']]
         s = 'named, in order: ' + '; '.join(parts)
@@ -139,6 +141,12 @@ def answer_line(report: dict) -> str:
         if report['unexplained']:
             s += '; still UNEXPLAINED: ' + report['unexplained']['summary']
         return s
+    if report['effect'] == 'ambiguous':
+        a = report['ambiguous']
+        split = ', '.join(f'{k} {100 * v:.0f} %' for k, v in a['wins'].items())
+        return (f"AMBIGUOUS: the bootstrap splits ({split}), best {a['best']} supported in "
+                f"{100 * a['support']:.0f} % of replicates (< {100 * report['decision']['min_confidence']:.0f} %); nothing named"
+                + ('; ' + report['unexplained']['summary'] if report['unexplained'] else ''))
     if report['effect'] == 'unexplained':
         return ('UNEXPLAINED residual, no candidate fits (' +
                 report['unexplained']['why_not_named'] + '): ' +

@@ -24,7 +24,6 @@ encoder_scale       torque,  -d tau_model / d s_j and -J[:, j] q_j (a measured  
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import combinations
 
 import numpy as np
 
@@ -328,9 +327,3 @@ def restrict(term: Term, keep_groups: list) -> Term | None:
     remap = {i: n for n, i in enumerate(idx)}
     t.groups = {g: [remap[i] for i in term.groups[g]] for g in keep_groups}
     return t
-
-
-def subsets(groups: list):
-    for k in range(len(groups), 0, -1):
-        for s in combinations(groups, k):
-            yield list(s)

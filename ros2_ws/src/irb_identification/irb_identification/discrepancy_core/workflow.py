@@ -1,13 +1,24 @@
 """The discrepancy workflow end to end: bags + model -> report dict + updated model. No rclpy.
 
-1. residuals of the nominal model on every bag (residuals.py), pooled (library.py);
-2. localisation: residual RMS per joint over speed bins, position bins and runs;
-3. the fit part (time blocks of ``block_s`` with even index, or the bags not given as
-   hold-out) scores the library (selection.py);
-4. the named effect is refitted on the fit part and written with the model's friction map as
-   one YAML (``friction_map:`` + ``effects:``), loadable by the simulator
-   (``plant_friction_file``) and by the controller (``friction_map_file``);
-5. held-out part: residual RMS before/after per joint (torque), TCP and command channel.
+1. residuals of the nominal model on every bag (residuals.py; the smoothing window adapts to
+   fast reversals), pooled (library.py); effects (``effects:``) and model errors
+   (``model_errors:``) the model file already has are subtracted;
+2. the fit part (time blocks of ``block_s`` with even index, or the bags not given as
+   hold-out) feeds the forward selection (forward.py) over the candidates of terms.py: the 11
+   physical effects not yet in the model, the model-error candidates, and refits of the known
+   effects; each step adds the best eligible candidate with a joint refit of everything
+   selected, until the next one is not significant on the held-out part or not supported by
+   the block bootstrap;
+3. what remains is compared with the noise floor per channel block (configured clean-data
+   floor combined with the effort noise measured in the bags): blocks above
+   ``unexplained_ratio`` x floor are reported as ``unexplained`` with where (speed, position,
+   time, run);
+4. the named terms are written with the model as one YAML: ``friction_map:`` (+ fitted
+   Coulomb/viscous levels), ``effects:`` (known + named + refitted), ``model_errors:`` (torque
+   gain, encoder scale, link inertial changes), loadable by the simulator
+   (``plant_friction_file``) and the controller (``friction_map_file``);
+5. held-out part: residual RMS before/after for every block (all joints and channels) and one
+   noise-normalised reduction over all of them.
 """
 from __future__ import annotations
 
@@ -18,12 +29,11 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from irb_control.plant_effects import PlantEffects, load_plant_effects, save_effects
+from irb_control.plant_effects import (EFFECT_NAMES, PlantEffects, effect_to_dict,
+                                       load_plant_effects, save_effects)
 from irb_description.friction import load_friction_map
 
 from .bagdata import read_run
-from irb_control.plant_effects import EFFECT_NAMES, effect_to_dict
-
 from .forward import Decision, forward_select
 from .library import INERTIAL_LINKS, TCP, TORQUE, Grids, contribution, pool, to_block
 from .residuals import ResidualConfig, prepare_run
@@ -85,51 +95,6 @@ def load_model_file(path: str | Path, joint_names):
     fm = load_friction_map(path, joint_names)
     effects = load_plant_effects(path)
     return fm, effects, yaml.safe_load(Path(path).read_text())
-
-
-def _rms(a, axis=0):
-    a = np.asarray(a, float)
-    return np.sqrt(np.mean(a**2, axis=axis)) if a.size else np.full(3, np.nan)
-
-
-def _channel_rms(P, corr: dict) -> dict:
-    """RMS per channel of P's residuals minus the contributions in ``corr`` (channel -> arr)."""
-    out = {}
-    r = P.r - corr.get(TORQUE, 0.0)
-    out['torque_nm'] = [float(_rms(r[P.mask[:, j], j])) if P.mask[:, j].any() else None
-                        for j in range(3)]
-    rt = P.r_tcp - corr.get(TCP, 0.0)
-    out['tcp_m'] = float(np.sqrt(np.mean(np.sum(rt**2, axis=1)))) if len(rt) else None
-    rc = P.r_cmd - corr.get(COMMAND, 0.0)
-    out['command_nm'] = [float(x) for x in _rms(rc)] if len(rc) else None
-    return out
-
-
-def localise(P, speed_bins) -> dict:
-    """Where the torque residual is large: RMS per joint over speed and position bins."""
-    out = {}
-    for j in range(3):
-        m = P.mask[:, j]
-        v, q, r = np.abs(P.qd[m, j]), P.q[m, j], P.r[m, j]
-        sb = np.asarray(speed_bins)
-        rms_v = [float(_rms(r[(v >= a) & (v < b)])) if np.any((v >= a) & (v < b)) else None
-                 for a, b in zip(sb[:-1], sb[1:])]
-        if len(q):
-            qb = np.linspace(q.min(), q.max() + 1e-9, 7)
-            rms_q = [float(_rms(r[(q >= a) & (q < b)])) if np.any((q >= a) & (q < b))
-                     else None for a, b in zip(qb[:-1], qb[1:])]
-        else:
-            qb, rms_q = np.zeros(1), []
-        out[f'joint_{j + 1}'] = {
-            'rms_nm': float(_rms(r)) if len(r) else None,
-            'mean_nm': float(np.mean(r)) if len(r) else None,
-            'speed_bins_rad_s': sb.tolist(), 'rms_by_speed_nm': rms_v,
-            'position_bins_rad': qb.tolist(), 'rms_by_position_nm': rms_q}
-    worst = max(range(3), key=lambda j: out[f'joint_{j + 1}']['rms_nm'] or 0.0)
-    wj = out[f'joint_{worst + 1}']
-    k = int(np.nanargmax([x if x is not None else np.nan for x in wj['rms_by_speed_nm']]))
-    out['largest'] = {'joint': worst + 1, 'speed_range_rad_s': wj['speed_bins_rad_s'][k:k + 2]}
-    return out
 
 
 def _floors(config, P) -> dict:
@@ -361,8 +326,9 @@ def _cb_name(cb) -> str:
 
 
 def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
-                 holdout_bags=(), model=None, log=None) -> WorkflowResult:
-    """Analyse ``bags`` (+ ``holdout_bags``) against the model file; see module docstring."""
+                 holdout_bags=(), model=None, log=None, runs=None) -> WorkflowResult:
+    """Analyse ``bags`` (+ ``holdout_bags``) against the model file; see module docstring.
+    ``runs``: the RunData of the bags if already in memory (benchmark: no bag round trip)."""
     from irb_description.model import RobotModel
     t_start = time.perf_counter()
     model = model or RobotModel.load()
@@ -376,7 +342,8 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
     if not isinstance(known_errors, dict) or set(known_errors) - set(MODEL_ERRORS):
         raise ValueError(f'{model_path}: model_errors must map names of {MODEL_ERRORS}')
     all_bags = list(bags) + list(holdout_bags)
-    runs = [read_run(b, model.joint_names) for b in all_bags]
+    if runs is None:
+        runs = [read_run(b, model.joint_names) for b in all_bags]
     t_origin = min(r.t[0] for r in runs)
     channels = [prepare_run(r, model, fm, config.residual, t_origin) for r in runs]
     P = pool(channels, model, fm, config.block_s, config.grids, config.residual)
@@ -509,9 +476,16 @@ def _params_of(t, v, ci, boot=None) -> dict:
             if k in GRID_SCALES or not bs:
                 out[k] = {'value': val, 'ci95': None, 'profiled_on_grid': k in GRID_SCALES}
                 continue
-            arr = np.array([b[k] for b in bs], float)
-            lo, hi = np.percentile(arr, [2.5, 97.5], axis=0)
-            out[k] = {'value': val, 'ci95': [np.asarray(lo).tolist(), np.asarray(hi).tolist()]}
+            arr = np.array([b[k] for b in bs], float).reshape(len(bs), -1)
+            lo, hi = np.array(val, float).reshape(-1).copy(), np.array(val, float).reshape(-1)
+            hi = hi.copy()
+            for i in range(arr.shape[1]):         # e.g. stiffness inf on unselected joints
+                col = arr[:, i][np.isfinite(arr[:, i])]
+                if len(col):
+                    lo[i], hi[i] = np.percentile(col, [2.5, 97.5])
+            shape = np.shape(val)
+            out[k] = {'value': val, 'ci95': [lo.reshape(shape).tolist(),
+                                             hi.reshape(shape).tolist()]}
         return out
     out = {}
     for i, lab in enumerate(t.labels):
@@ -561,6 +535,7 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
             'joints': [j + 1 for j in t.joints], 'channel': t.channel,
             'delta_bic': row['delta_bic'], 'heldout_delta_bic': st.heldout_delta,
             'confidence': st.support, 'share_of_explained': max(shares[i], 0.0) / tot,
+            'indistinguishable_from': st.aliases,
             'parameters': _params_of(t, fr.beta[t.key()], fr.ci.get(t.key()),
                                      fr.boot.get(t.key())),
             'flags': fr.flags.get(t.key(), [])})
@@ -569,10 +544,17 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
     above = {k: v for k, v in loc.items() if v['above']}
     last = fr.steps[-1] if fr.steps else None
     n_boot = max(config.n_boot, 1)
+    ambiguous = None
+    if last is not None and last.added is None and last.best is not None and \
+            last.stop_reason.startswith(f'{last.best}: bootstrap support'):
+        ambiguous = {'best': last.best, 'aliases': last.aliases, 'support': last.support,
+                     'wins': {k: v / n_boot for k, v in last.wins.items()}}
     if named:
         effect = '+'.join(n['effect'] if n['kind'] != 'refit' else f"refit:{n['effect']}"
                           for n in named)
         confidence = min(n['confidence'] for n in named)
+    elif ambiguous:
+        effect, confidence = 'ambiguous', ambiguous['support']
     else:
         none_frac = (last.wins.get('none', 0) / n_boot) if last else 1.0
         effect = 'unexplained' if above else 'none'
@@ -605,6 +587,7 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
         {n['effect']: n['parameters'] for n in named},
         'confidence': float(confidence),
         'unexplained': unexplained,
+        'ambiguous': ambiguous,
         'rms_before': before, 'rms_after': after, 'noise_floor': {
             _cb_name(cb): B.floor[cb] for cb in B.keys},
         'heldout_reduction': reduction,
