@@ -145,7 +145,8 @@ def answer_line(report: dict) -> str:
         a = report['ambiguous']
         split = ', '.join(f'{k} {100 * v:.0f} %' for k, v in a['wins'].items())
         return (f"AMBIGUOUS: the bootstrap splits ({split}), best {a['best']} supported in "
-                f"{100 * a['support']:.0f} % of replicates (< {100 * report['decision']['min_confidence']:.0f} %); nothing named"
+                f"{100 * a['support']:.0f} % of replicates (< "
+                f"{100 * report['decision']['min_confidence']:.0f} %); nothing named"
                 + ('; ' + report['unexplained']['summary'] if report['unexplained'] else ''))
     if report['effect'] == 'unexplained':
         return ('UNEXPLAINED residual, no candidate fits (' +
