@@ -344,3 +344,23 @@ def test_config_file_round_trip(tmp_path):
     assert cfg.heldout_threshold > 0 and cfg.unexplained_ratio > 1
     assert dataclasses.asdict(cfg)['noise_floor']['tcp_m'] > 0
     assert json.dumps(dataclasses.asdict(cfg), default=str)
+
+
+def test_indistinguishable_candidates_are_aliases_not_a_split(rng):
+    """Two candidates with the same signature on this data (as joint-1 armature and link 2's
+    mass on its axis): the bootstrap splits between them, yet the explanation is certain; the
+    named one lists the other as indistinguishable and the confidence counts both."""
+    B, xa, xb = _synthetic(rng)
+    tbs = np.unique(np.concatenate([B.tb[k] for k in B.keys]))
+
+    def cands(e, fitrow, selected):
+        out = [_term('b', ('torque', 1), xb), _term('b_alias', ('torque', 1), 2.0 * xb)]
+        return [t for t in out if t.key() not in selected]
+    fr = forward_select(B, B.y, tbs[tbs % 2 == 0], tbs[tbs % 2 == 1], cands,
+                        lambda t, v: ({}, []), Decision(n_boot=20))
+    assert len(fr.selected) == 1
+    step = fr.steps[0]
+    other = {'b': 'b_alias', 'b_alias': 'b'}[step.added]
+    assert step.aliases == [other]
+    n = sum(step.wins.values())
+    assert step.support == (step.wins.get('b', 0) + step.wins.get('b_alias', 0)) / n >= 0.6
