@@ -224,6 +224,9 @@ def main(args=None) -> int:
         todo = [c for c in todo if c['group'] in opts.groups]
     if opts.quick:
         todo = todo[::5]
+    # interleaved (fixed order): a run stopped early still covers every group
+    import random
+    random.Random(0).shuffle(todo)
     rows = []
     load0 = list(os.getloadavg())
     t_all = time.perf_counter()
@@ -250,15 +253,10 @@ def main(args=None) -> int:
         print(f"[{i + 1}/{len(todo)}] {c['group']:11s} {c['plan']:5s} {tag:40s} -> "
               f"{row['answer']:40s} conf {row['confidence']:.2f} "
               f"{'ok ' if row['correct'] else 'BAD'} {t2 - t1:.1f} s", flush=True)
-    summary = summarise(rows)
-    out = {'plans': opts.plans, 'sizes': opts.sizes, 'pair_plan': opts.pair_plan,
-           'quick': opts.quick, 'n_boot': opts.n_boot,
-           'effort_noise': dataclasses.asdict(noise),
-           'load_average_start_end': [load0, list(os.getloadavg())],
-           'total_s': time.perf_counter() - t_all,
-           'summary': summary, 'cases': rows}
-    Path(opts.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(opts.out).write_text(json.dumps(out, indent=1, default=str))
+        if (i + 1) % 10 == 0:
+            write(opts, rows, noise, load0, t_all, partial=True)
+    out = write(opts, rows, noise, load0, t_all, partial=False)
+    summary = out['summary']
     print('\n| group | n | correct | wrong name conf>=0.6 | unexplained | workflow s median / '
           'p90 / max |')
     print('|---|---|---|---|---|---|')
@@ -274,6 +272,22 @@ def main(args=None) -> int:
               f"x{r.get('size')} -> {r.get('answer', r.get('error'))}")
     print(f"written {opts.out} ({out['total_s']:.0f} s, load {out['load_average_start_end']})")
     return 0
+
+
+def write(opts, rows, noise, load0, t_all, partial):
+    """Summary + cases as JSON (also every 10 cases: a stopped run keeps its results)."""
+    import dataclasses
+    summary = summarise(rows)
+    out = {'plans': opts.plans, 'sizes': opts.sizes, 'pair_plan': opts.pair_plan,
+           'quick': opts.quick, 'n_boot': opts.n_boot,
+           'effort_noise': dataclasses.asdict(noise),
+           'load_average_start_end': [load0, list(os.getloadavg())],
+           'total_s': time.perf_counter() - t_all,
+           'partial': partial, 'cases_done': len(rows),
+           'summary': summary, 'cases': rows}
+    Path(opts.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(opts.out).write_text(json.dumps(out, indent=1, default=str))
+    return out
 
 
 if __name__ == '__main__':
