@@ -168,10 +168,11 @@ def _term_contrib(t: Term, beta: np.ndarray) -> dict:
 
 def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
                    make_candidates, plausibility, decision: Decision = Decision(),
-                   log=None) -> ForwardResult:
+                   log=None, rebuild=None) -> ForwardResult:
     """Forward selection (module docstring). ``make_candidates(e, fitrow, selected_keys)``
     returns the candidate Terms built on the current residual e; ``plausibility(term,
-    values)`` returns (bad groups -> reason, flags)."""
+    values)`` returns (bad groups -> reason, flags); ``rebuild(term, residual, fitrow)`` the
+    term with its scales re-profiled on a residual (None: scales stay)."""
     rng = np.random.default_rng(decision.seed)
     all_tb = np.unique(np.concatenate([B.tb[cb] for cb in B.keys]))
     fit_set = set(fit_tb.tolist())
@@ -304,13 +305,14 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
             A = A_S + A_c
             r1h = st.rss(Wh, A, st.solve(W, A))
             heldout = float(sum(ne_h[cb] * np.log(r1h[cb] / r0h[cb]) for cb in B.keys))
-        # aliases: eligible candidates that explain nothing more once the best one is in
-        # (e.g. joint-1 armature and link 2's mass at its axis): a replicate won by an alias
-        # supports the same explanation; they are reported with it
+        # aliases: eligible candidates such that neither explains anything more once the other
+        # is in (e.g. joint-1 armature and link 2's mass at its axis): a replicate won by an
+        # alias supports the same explanation; they are reported with it
         aliases = []
         for d_, ci_, tc_, A_c_, k_, cbs_, row_ in eligible[1:]:
-            A_best = A_S + A_c
-            if score(W, A_c_, k_, cbs_, None, A_best)[0] >= -decision.bic_threshold:
+            # mutual: neither adds anything once the other is in
+            if (score(W, A_c_, k_, cbs_, None, A_S + A_c)[0] >= -decision.bic_threshold and
+                    score(W, A_c, k, cbs_c, None, A_S + A_c_)[0] >= -decision.bic_threshold):
                 aliases.append(tc_.key())
         row['aliases'] = aliases
         # bootstrap of the step's decision
@@ -349,6 +351,8 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         if log:
             log(f'step {len(S)}: {tc.key()} dBIC {d:.1f}, held-out {heldout}, support '
                 f'{support:.2f}')
+        if rebuild is not None and len(S) > 1:
+            S = _backfit_scales(B, e0, S, fit_tb, fitrow, rebuild)
         e = _refit(B, e0, S, fit_tb)
     # final joint fit and bootstrap intervals
     beta, ci, contrib, per_term = {}, {}, {cb: np.zeros(len(B.rows[cb])) for cb in B.keys}, {}
@@ -378,16 +382,36 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
     return ForwardResult(S, beta, ci, steps, contrib, per_term, flags, n_eff_last, boot)
 
 
-def _refit(B, e0, S, fit_tb):
-    """Residual after the joint refit of S on the fit part (all rows)."""
+def _refit(B, e0, S, fit_tb, parts: bool = False):
+    """Residual after the joint refit of S on the fit part (all rows); with ``parts`` also
+    each term's contribution (cb -> array)."""
     st = Stats(B, e0, S)
     all_tb = st.tbs
     w = np.isin(all_tb, fit_tb).astype(float)
     A = list(range(st.p))
     bu = st.unscale(A, st.solve(st.weighted(w), A))
     e = {cb: e0[cb].copy() for cb in B.keys}
+    contrib = []
     for t, off in zip(S, st.offsets):
-        for cb, c in _term_contrib(t, bu[off]).items():
-            e[cb] = e[cb] - c
-    return e
+        c = _term_contrib(t, bu[off])
+        contrib.append(c)
+        for cb, v in c.items():
+            e[cb] = e[cb] - v
+    return (e, contrib) if parts else e
+
+
+def _backfit_scales(B, e0, S, fit_tb, fitrow, rebuild):
+    """Re-profile the grid scales of the selected terms, each on the residual the others
+    leave (one backfitting sweep after a step): a scale chosen before a later effect was in
+    can then follow the joint refit."""
+    e, contrib = _refit(B, e0, S, fit_tb, parts=True)
+    out = list(S)
+    for i, t in enumerate(S):
+        if not t.n_scales:
+            continue
+        partial = {cb: e[cb] + contrib[i].get(cb, 0.0) for cb in B.keys}
+        nt = rebuild(t, partial, fitrow)
+        if nt is not None:
+            out[i] = nt
+    return out
 

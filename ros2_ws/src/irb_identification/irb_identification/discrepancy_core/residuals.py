@@ -166,6 +166,13 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
         pred = np.stack([np.interp(eff_t - c.command_lag_samples * T, run.cmd_t,
                                    run.cmd[:, j]) for j in range(3)], axis=1)
         r_cmd = eff - pred
+        if len(r_cmd) > 4 * w:
+            # the reported effort's own noise, free of the torque signal: high-pass part of
+            # effort - cmd(t - L T) (the nominal pipeline takes the signal out)
+            hpc = r_cmd - savgol_filter(r_cmd, w, c.sg_order, axis=0)
+            madc = np.median(np.abs(hpc - np.median(hpc, axis=0)), axis=0) * 1.4826
+            raw = madc / max(np.sqrt(max(1.0 - gain**2, 1e-6)), 1e-3)
+            noise = np.minimum(noise, raw * gain)
     else:
         eff_t, eff, r_cmd = np.empty(0), np.empty((0, 3)), np.empty((0, 3))
     return Channels(run.name, run.t, q, qd, qdd, effort, tau_rigid, tau_f, r_tau, moving,

@@ -38,7 +38,7 @@ from .forward import Decision, forward_select
 from .library import INERTIAL_LINKS, TCP, TORQUE, Grids, contribution, pool, to_block
 from .residuals import ResidualConfig, prepare_run
 from .selection import GRID_SCALES
-from .terms import MODEL_ERRORS, build_term, make_blocks
+from .terms import MODEL_ERRORS, build_term, make_blocks, restrict
 
 
 @dataclass(frozen=True)
@@ -405,13 +405,26 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
                 out.append(t)
         return out
 
+    def rebuild(t, e, fitrow):
+        nt = build_term(t.name, P, B, e, fitrow, config.grids, t.kind, joints=t.joints,
+                        known_delay_s=kd, record_s=record_s, stroke=stroke,
+                        fixed_scales=None if t.kind != 'refit' or t.name == 'time_delay'
+                        else known_scales(t.name, t.known))
+        if nt is None or set(t.groups) - set(nt.groups):
+            return None
+        nt = restrict(nt, list(t.groups))
+        if nt is not None:
+            nt.known = t.known
+        return nt
+
     check = plausibility_check(model, fm, record_s, stroke, known.blocks)
     dec = Decision(config.bic_threshold, config.heldout_threshold, config.min_confidence,
                    config.min_fit_reduction, config.n_boot, config.seed, config.max_effects)
     if log:
         log(f'{len(runs)} runs, {len(B.keys)} channel blocks, fit/held-out time blocks '
             f'{len(fit_blocks)}/{len(hold_blocks)}')
-    fr = forward_select(B, B.y, fit_blocks, hold_blocks, make_candidates, check, dec, log)
+    fr = forward_select(B, B.y, fit_blocks, hold_blocks, make_candidates, check, dec, log,
+                        rebuild)
     report = _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_bags,
                      fit_blocks, hold_blocks, channels)
     effects, friction_yaml, errors = _updated_model(fr, known, model_yaml, known_errors)
