@@ -354,7 +354,13 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         if rebuild is not None and len(S) > 1:
             S = _backfit_scales(B, e0, S, fit_tb, fitrow, rebuild)
         e = _refit(B, e0, S, fit_tb)
-    # final joint fit and bootstrap intervals
+    fin = final_fit(B, e0, S, fitmask_tb, decision.n_boot, rng)
+    return ForwardResult(S, *fin[:2], steps, *fin[2:4], flags, n_eff_last, fin[4])
+
+
+def final_fit(B: Blocks, e0: dict, S: list, fitmask_tb: np.ndarray, n_boot: int, rng):
+    """Joint fit of S on the fit blocks and bootstrap intervals: (beta, ci, contributions,
+    per-term contributions, bootstrap values), all by term key."""
     beta, ci, contrib, per_term = {}, {}, {cb: np.zeros(len(B.rows[cb])) for cb in B.keys}, {}
     boot = {}
     if S:
@@ -364,7 +370,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         bu = st.unscale(A, st.solve(W, A))
         fit_idx = np.flatnonzero(fitmask_tb)
         boots = []
-        for _ in range(decision.n_boot):
+        for _ in range(n_boot):
             draw = rng.choice(fit_idx, size=len(fit_idx), replace=True)
             wb = np.bincount(draw, minlength=len(st.tbs)).astype(float)
             boots.append(st.unscale(A, st.solve(st.weighted(wb), A)))
@@ -379,7 +385,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
             per_term[t.key()] = c
             for cb, v in c.items():
                 contrib[cb] = contrib[cb] + v
-    return ForwardResult(S, beta, ci, steps, contrib, per_term, flags, n_eff_last, boot)
+    return beta, ci, contrib, per_term, boot
 
 
 def _refit(B, e0, S, fit_tb, parts: bool = False):

@@ -82,6 +82,7 @@ class Pooled:
     effort: np.ndarray | None = None
     inertial: np.ndarray | None = None
     enc_tau: np.ndarray | None = None
+    off_tau: np.ndarray | None = None
     noise: dict = field(default_factory=dict)
 
     def subset(self, blocks: np.ndarray) -> 'Pooled':
@@ -96,7 +97,8 @@ class Pooled:
                       self.v_s, {k: v[a] for k, v in self.payload_unit.items()},
                       None if self.effort is None else self.effort[a],
                       None if self.inertial is None else self.inertial[a],
-                      None if self.enc_tau is None else self.enc_tau[a], dict(self.noise))
+                      None if self.enc_tau is None else self.enc_tau[a],
+                      None if self.off_tau is None else self.off_tau[a], dict(self.noise))
 
 
 def pool(channels: list[Channels], model, friction, block_s: float = 1.0,
@@ -140,6 +142,7 @@ def pool(channels: list[Channels], model, friction, block_s: float = 1.0,
     P.effort = np.concatenate([c.effort for c in channels]).reshape(-1, 3)
     P.inertial = inertial_columns(model, P.q, P.qd, P.qdd)
     P.enc_tau = encoder_scale_torque(model, friction, P.q, P.qd, P.qdd)
+    P.off_tau = encoder_offset_torque(model, P.q, P.qd, P.qdd)
     P.noise = {'effort_nm': np.sqrt(np.mean([np.square(c.extra['effort_noise_nm'])
                                              for c in channels], axis=0))}
     return P
@@ -160,6 +163,20 @@ def inertial_columns(model, q, qd, qdd) -> np.ndarray:
     out = np.empty((len(q), 3, 8))
     for i, (a, b, c) in enumerate(zip(q, qd, qdd)):
         out[i] = pin.computeJointTorqueRegressor(pm, pd, a, b, c)[:, cols]
+    return out
+
+
+def encoder_offset_torque(model, q, qd, qdd, h: float = 1e-6) -> np.ndarray:
+    """(N, 3 rows, 3 k): d/dq_k of M qdd + C qd + g (central differences). A measured
+    q_k = q_true,k + d_k leaves the torque residual -d_k times column k."""
+    out = np.empty((len(q), 3, 3))
+    for k in range(3):
+        up, dn = np.array(q, float), np.array(q, float)
+        up[:, k] += h
+        dn[:, k] -= h
+        tu = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(up, qd, qdd)])
+        td = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(dn, qd, qdd)])
+        out[:, :, k] = (tu - td) / (2 * h)
     return out
 
 

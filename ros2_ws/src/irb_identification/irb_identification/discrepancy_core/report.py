@@ -148,6 +148,13 @@ def answer_line(report: dict) -> str:
                 f"{100 * a['support']:.0f} % of replicates (< "
                 f"{100 * report['decision']['min_confidence']:.0f} %); nothing named"
                 + ('; ' + report['unexplained']['summary'] if report['unexplained'] else ''))
+    pf = report.get('partial_fits') or []
+    if pf and report['effect'] in ('unexplained', 'none'):
+        return ('UNEXPLAINED residual: ' + (report['unexplained'] or {}).get('summary', '') +
+                '; partly fitted by ' + ', '.join(
+                    f"{p['effect']} ({p['block']}: {p['explained_rms']:.3g} explained, "
+                    f"{p['remaining_rms']:.3g} left)" for p in pf) +
+                ' -- not named: no candidate describes it')
     if report['effect'] == 'unexplained':
         return ('UNEXPLAINED residual, no candidate fits (' +
                 report['unexplained']['why_not_named'] + '): ' +

@@ -19,6 +19,8 @@ inertial_link2      torque   regressor columns of m, m c_x, m c_y, m c_z of link
 inertial_link3      torque   the same for link 3 (+ wrist, tool, payload)          dm, d(mc)
 encoder_scale       torque,  -d tau_model / d s_j and -J[:, j] q_j (a measured     e_j = s-1
                     tcp      q_j = (1 + e_j) q_true, e.g. a wrong gear ratio)
+encoder_offset      torque,  -d tau_rigid / d q_j and -J[:, j] (a measured         d_j [rad]
+                    tcp      q_j = q_true + d_j: a zero-offset calibration error)
 =================== ======== ===================================================== ==========
 """
 from __future__ import annotations
@@ -32,10 +34,11 @@ from .library import (CHANNEL, COMMAND, INERTIAL_LINKS, PER_JOINT_SCALE, SHARED_
                       torque_columns)
 
 MODEL_ERRORS = ('coulomb_level', 'viscous_level', 'torque_gain', 'inertial_link2',
-                'inertial_link3', 'encoder_scale')
+                'inertial_link3', 'encoder_scale', 'encoder_offset')
 MODEL_ERROR_CHANNEL = {'coulomb_level': TORQUE, 'viscous_level': TORQUE,
                        'torque_gain': TORQUE, 'inertial_link2': TORQUE,
-                       'inertial_link3': TORQUE, 'encoder_scale': 'torque+tcp'}
+                       'inertial_link3': TORQUE, 'encoder_scale': 'torque+tcp',
+                       'encoder_offset': 'torque+tcp'}
 INERTIAL_LABELS = ('mass_kg', 'first_moment_x_kgm', 'first_moment_y_kgm', 'first_moment_z_kgm')
 
 
@@ -241,6 +244,17 @@ def build_term(name: str, P: Pooled, B: Blocks, e: dict, fitrow: dict, grids: Gr
         if not cols:
             return None
         t = Term(name, kind, [0, 1, 2], cols, [f'encoder_scale[{j + 1}]' for j in range(3)])
+        t.groups = {j: [j] for j in range(3)}
+        return t
+    if name == 'encoder_offset':
+        cols = {}
+        for j in tq:
+            cols[(TORQUE, j)] = -P.off_tau[B.rows[(TORQUE, j)], j, :]
+        if (TCP, None) in B.rows:
+            cols[(TCP, None)] = -P.J.reshape(-1, 3)
+        if not cols:
+            return None
+        t = Term(name, kind, [0, 1, 2], cols, [f'encoder_offset[{j + 1}]' for j in range(3)])
         t.groups = {j: [j] for j in range(3)}
         return t
     if name in ('backlash', 'joint_elasticity'):

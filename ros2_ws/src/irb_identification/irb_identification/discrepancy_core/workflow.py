@@ -34,7 +34,7 @@ from irb_control.plant_effects import (EFFECT_NAMES, PlantEffects, effect_to_dic
 from irb_description.friction import load_friction_map
 
 from .bagdata import read_run
-from .forward import Decision, forward_select
+from .forward import Decision, final_fit, forward_select
 from .library import INERTIAL_LINKS, TCP, TORQUE, Grids, contribution, pool, to_block
 from .residuals import ResidualConfig, prepare_run
 from .selection import GRID_SCALES
@@ -164,6 +164,8 @@ def model_error_dict(name: str, t, values) -> dict:
         return {'gain': [1.0 + x for x in per]}
     if name == 'encoder_scale':
         return {'scale_error': per}
+    if name == 'encoder_offset':
+        return {'offset_rad': per}
     if name == 'coulomb_level':
         return {'delta_coulomb_nm': per}
     if name == 'viscous_level':
@@ -187,6 +189,8 @@ def model_error_values(name: str, params: dict, t) -> np.ndarray:
         per = [g - 1.0 for g in params['gain']]
     elif name == 'encoder_scale':
         per = params['scale_error']
+    elif name == 'encoder_offset':
+        per = params['offset_rad']
     elif name in ('coulomb_level', 'viscous_level'):
         per = next(iter(params.values()))
     else:
@@ -252,6 +256,8 @@ def plausibility_check(model, fm, record_s: float, stroke: np.ndarray, known: di
                 bad[g] = f'torque gain {1 + x:.3g} on joint {j + 1}'
             elif name == 'encoder_scale' and abs(x) > 0.1:
                 bad[g] = f'encoder scale error {x:.3g} on joint {j + 1}'
+            elif name == 'encoder_offset' and abs(x) > 0.1:
+                bad[g] = f'encoder offset {x:.3g} rad on joint {j + 1}'
             elif name == 'payload_mass' and x < 0:
                 bad[g] = f'negative payload mass {x:.3g} kg'
             elif name == 'time_delay' and not 0.5 <= x <= 1.5:
@@ -425,14 +431,50 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
             f'{len(fit_blocks)}/{len(hold_blocks)}')
     fr = forward_select(B, B.y, fit_blocks, hold_blocks, make_candidates, check, dec, log,
                         rebuild)
+    partial = _demote_partial_fits(config, B, fr, fit_blocks, hold_blocks)
     report = _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_bags,
                      fit_blocks, hold_blocks, channels)
+    report['partial_fits'] = partial
     effects, friction_yaml, errors = _updated_model(fr, known, model_yaml, known_errors)
     res = WorkflowResult(report, channels, P, None, None, fr,
                          {'friction_yaml': friction_yaml, 'effects': PlantEffects(effects),
                           'model_errors': errors, 'blocks': B, 'hold_blocks': hold_blocks})
     report['run_time_s'] = time.perf_counter() - t_start
     return res
+
+
+def _demote_partial_fits(config, B, fr, fit_blocks, hold_blocks) -> list:
+    """A named term whose main block (where its contribution is largest) stays above
+    ``unexplained_ratio`` x floor on the held-out part, and which explains less there than
+    remains, is a partial fit of something no candidate describes (e.g. Coulomb level for a
+    position-dependent tight spot): it is taken out (not named, not written) and listed.
+    The rest are refitted jointly."""
+    hold = {cb: np.isin(B.tb[cb], hold_blocks) for cb in B.keys}
+
+    def ms(x, cb):
+        m = hold[cb]
+        return float(np.mean(x[m] ** 2)) if m.any() else 0.0
+    out, keep = [], []
+    for t in fr.selected:
+        c = fr.per_term[t.key()]
+        main = max(c, key=lambda cb: ms(c[cb], cb) / B.floor[cb] ** 2)
+        after = ms(B.y[main] - fr.contributions[main], main)
+        before = ms(B.y[main] - fr.contributions[main] + c[main], main)
+        still = np.sqrt(after) > config.unexplained_ratio * B.floor[main]
+        if t.kind != 'refit' and still and before - after < after:
+            out.append({'effect': t.key(), 'block': _cb_name(main),
+                        'explained_rms': float(np.sqrt(max(before - after, 0.0))),
+                        'remaining_rms': float(np.sqrt(after)),
+                        'floor': float(B.floor[main])})
+        else:
+            keep.append(t)
+    if out:
+        all_tb = np.unique(np.concatenate([B.tb[cb] for cb in B.keys]))
+        fin = final_fit(B, B.y, keep, np.isin(all_tb, fit_blocks), config.n_boot,
+                        np.random.default_rng(config.seed + 1))
+        fr.selected = keep
+        fr.beta, fr.ci, fr.contributions, fr.per_term, fr.boot = fin
+    return out
 
 
 def _updated_model(fr, known, model_yaml, known_errors):
@@ -462,9 +504,9 @@ def _updated_model(fr, known, model_yaml, known_errors):
             old = errors.get(t.name)
             if old and t.name == 'torque_gain':
                 new = {'gain': [a * b for a, b in zip(old['gain'], new['gain'])]}
-            elif old and t.name == 'encoder_scale':
-                new = {'scale_error': [a + b for a, b in zip(old['scale_error'],
-                                                             new['scale_error'])]}
+            elif old and t.name in ('encoder_scale', 'encoder_offset'):
+                key = next(iter(new))
+                new = {key: [a + b for a, b in zip(old[key], new[key])]}
             elif old:
                 new = {'delta_mass_kg': old['delta_mass_kg'] + new['delta_mass_kg'],
                        'delta_first_moment_kgm': [a + b for a, b in zip(
@@ -540,7 +582,7 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
     tot = sum(max(s, 0.0) for s in shares) or 1.0
     named = []
     for i, t in enumerate(fr.selected):
-        st = fr.steps[i]
+        st = next(x for x in fr.steps if x.added == t.key())
         row = next(r for r in st.candidates if r['effect'] == t.key())
         named.append({
             'effect': t.name, 'kind': t.kind, 'order': i + 1,
