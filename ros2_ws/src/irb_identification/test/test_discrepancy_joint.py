@@ -372,3 +372,34 @@ def test_indistinguishable_candidates_are_aliases_not_a_split(rng):
     assert step.aliases == [other]
     n = sum(step.wins.values())
     assert step.support == (step.wins.get('b', 0) + step.wins.get('b_alias', 0)) / n >= 0.6
+
+
+def test_cogging_period_is_kept_below_half_the_stroke(model, plant_map, rng):
+    """A long-wave trend over a 0.3 rad stroke is no cogging: the profiled period stays
+    <= half the stroke (the old fit ran to the grid maximum, 0.6 rad), and a period longer
+    than that is rejected by the plausibility check."""
+    from irb_identification.discrepancy_core.library import Grids, Pooled
+    from irb_identification.discrepancy_core.terms import build_term, make_blocks
+    from irb_identification.discrepancy_core.workflow import plausibility_check
+    n = 3000
+    q = np.zeros((n, 3))
+    q[:, 0] = 0.15 * np.sin(np.linspace(0, 6 * np.pi, n))          # stroke 0.3 rad
+    qd = np.gradient(q, 0.004, axis=0)
+    r = np.zeros((n, 3))
+    r[:, 0] = 2.0 * q[:, 0] / 0.15 + 0.1 * rng.standard_normal(n)   # slow trend in q
+    z3, z0 = np.zeros((n, 3)), np.zeros(0)
+    mask = np.zeros((n, 3), bool)
+    mask[:, 0] = True
+    P = Pooled(np.arange(n) * 0.004, q, qd, z3, r, mask, np.arange(n) // 250,
+               np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)),
+               z0.astype(int), np.empty((0, 3)), np.empty((0, 3)), np.empty((1, 0, 3)),
+               np.zeros(1), z0.astype(int), np.ones(3) * 0.05, {})
+    B = make_blocks(P, {'torque': [0.25] * 3, 'tcp': 4e-5, 'command': [1e-3] * 3})
+    fitrow = {cb: np.ones(len(B.rows[cb]), bool) for cb in B.keys}
+    stroke = np.array([np.ptp(q[:, 0]), 0.0, 0.0])
+    t = build_term('cogging', P, B, B.y, fitrow, Grids(), stroke=stroke)
+    assert t.scales[0] <= stroke[0] / 2 + 1e-9
+    check = plausibility_check(model, plant_map, 12.0, stroke, {})
+    long = build_term('cogging', P, B, B.y, fitrow, Grids(), fixed_scales={0: 0.6})
+    bad, _ = check(long, np.array([1.0, 0.5]))
+    assert 0 in bad and 'stroke' in bad[0]
