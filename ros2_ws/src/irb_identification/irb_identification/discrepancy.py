@@ -49,22 +49,24 @@ def main(args=None) -> int:
     from .discrepancy_core.report import write_report
     from .discrepancy_core.workflow import WorkflowConfig, run_workflow, write_updated_model
     from irb_description.friction import FrictionMapError
-    config = WorkflowConfig.from_yaml(opts.config or default_config_path())
-    out = Path(opts.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from .discrepancy_core.report import answer_line
     try:
+        config = WorkflowConfig.from_yaml(opts.config or default_config_path())
+        for b in opts.bag + opts.holdout_bag:
+            if not Path(b).exists():
+                raise ValueError(f'bag {b} does not exist')
+        out = Path(opts.out)
+        out.mkdir(parents=True, exist_ok=True)
         result = run_workflow(opts.bag, opts.model, config, opts.holdout_bag,
                               log=lambda s: print(f'discrepancy: {s}'))
-    except (BagError, FrictionMapError, ValueError, OSError) as exc:
+    except (BagError, FrictionMapError, ValueError, OSError, TypeError, KeyError) as exc:
         print(f'discrepancy: {exc}', file=sys.stderr)
         return 1
     result.report['updated_model'] = str(write_updated_model(result, out / 'model_updated.yaml'))
     path = write_report(result, out, make_plots=not opts.no_plots)
     r = result.report
-    red = r['heldout_reduction']
-    print(f"discrepancy: effect {r['effect']} (joints {r['joints']}), confidence "
-          f"{r['confidence']:.2f}" + (f', held-out residual -{100 * red:.0f} %' if red is not None
-                                      else '') + f'; report {path}')
+    print(f"discrepancy: {r['effect']}, confidence {r['confidence']:.2f}: {answer_line(r)}; "
+          f"report {path}")
     return 0
 
 

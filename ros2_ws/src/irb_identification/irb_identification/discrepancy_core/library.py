@@ -25,7 +25,7 @@ encoder data (residuals.py); J is the TCP Jacobian at the camera instants.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from irb_control.plant_effects import EFFECT_CLASSES, PlantEffects
@@ -79,6 +79,11 @@ class Pooled:
     cmd_block: np.ndarray
     v_s: np.ndarray
     payload_unit: dict
+    effort: np.ndarray | None = None
+    inertial: np.ndarray | None = None
+    enc_tau: np.ndarray | None = None
+    off_tau: np.ndarray | None = None
+    noise: dict = field(default_factory=dict)
 
     def subset(self, blocks: np.ndarray) -> 'Pooled':
         """Samples whose block id is in ``blocks`` (all channels)."""
@@ -89,7 +94,11 @@ class Pooled:
                       self.mask[a], self.block[a], self.cam_q[b], self.cam_tau[b],
                       self.r_tcp[b], self.J[b], self.cam_block[b], self.eff[c],
                       self.r_cmd[c], self.cmd_pred[:, c], self.delays, self.cmd_block[c],
-                      self.v_s, {k: v[a] for k, v in self.payload_unit.items()})
+                      self.v_s, {k: v[a] for k, v in self.payload_unit.items()},
+                      None if self.effort is None else self.effort[a],
+                      None if self.inertial is None else self.inertial[a],
+                      None if self.enc_tau is None else self.enc_tau[a],
+                      None if self.off_tau is None else self.off_tau[a], dict(self.noise))
 
 
 def pool(channels: list[Channels], model, friction, block_s: float = 1.0,
@@ -130,7 +139,65 @@ def pool(channels: list[Channels], model, friction, block_s: float = 1.0,
                np.concatenate(preds, axis=1), delays, cat['kblock'], v_s, {})
     P.payload_unit = {z: payload_unit_torque(model, P.q, P.qd, P.qdd, (0.0, 0.0, z))
                       for z in grids.payload_offset_z}
+    P.effort = np.concatenate([c.effort for c in channels]).reshape(-1, 3)
+    P.inertial = inertial_columns(model, P.q, P.qd, P.qdd)
+    P.enc_tau = encoder_scale_torque(model, friction, P.q, P.qd, P.qdd)
+    P.off_tau = encoder_offset_torque(model, P.q, P.qd, P.qdd)
+    P.noise = {'effort_nm': np.sqrt(np.mean([np.square(c.extra['effort_noise_nm'])
+                                             for c in channels], axis=0))}
     return P
+
+
+#: links whose mass and first moments are candidates (pinocchio joint index of the body)
+INERTIAL_LINKS = {'inertial_link2': 2, 'inertial_link3': 3}
+
+
+def inertial_columns(model, q, qd, qdd) -> np.ndarray:
+    """(N, 3, 8): the rigid-body model's torque regressor columns (pinocchio
+    computeJointTorqueRegressor) of the mass m and first moments m c (body frame) of link 2
+    (0-3) and link 3 with wrist, tool and payload (4-7; one rigid body in the 3-joint model)."""
+    import pinocchio as pin
+    pm = model.model
+    pd = pm.createData()
+    cols = [10 * (INERTIAL_LINKS[k] - 1) + i for k in sorted(INERTIAL_LINKS) for i in range(4)]
+    out = np.empty((len(q), 3, 8))
+    for i, (a, b, c) in enumerate(zip(q, qd, qdd)):
+        out[i] = pin.computeJointTorqueRegressor(pm, pd, a, b, c)[:, cols]
+    return out
+
+
+def encoder_offset_torque(model, q, qd, qdd, h: float = 1e-6) -> np.ndarray:
+    """(N, 3 rows, 3 k): d/dq_k of M qdd + C qd + g (central differences). A measured
+    q_k = q_true,k + d_k leaves the torque residual -d_k times column k."""
+    out = np.empty((len(q), 3, 3))
+    for k in range(3):
+        up, dn = np.array(q, float), np.array(q, float)
+        up[:, k] += h
+        dn[:, k] -= h
+        tu = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(up, qd, qdd)])
+        td = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(dn, qd, qdd)])
+        out[:, :, k] = (tu - td) / (2 * h)
+    return out
+
+
+def encoder_scale_torque(model, friction, q, qd, qdd, h: float = 1e-5) -> np.ndarray:
+    """(N, 3 rows, 3 k): d/ds_k of the model torque M qdd + C qd + g + tau_f(qd) when joint k's
+    measured position (and its derivatives) is scaled by (1 + s_k), at s = 0 (central
+    differences). A measured q_k = (1 + e_k) q_true,k leaves the torque residual -e_k times
+    column k."""
+    out = np.empty((len(q), 3, 3))
+    for k in range(3):
+        up, dn = [np.array(x, float) for x in (q, qd, qdd)], [np.array(x, float)
+                                                            for x in (q, qd, qdd)]
+        for arr_u, arr_d in zip(up, dn):
+            arr_u[:, k] *= 1 + h
+            arr_d[:, k] *= 1 - h
+        tu = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(*up)])
+        td = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(*dn)])
+        tu += friction.torque(up[1])
+        td += friction.torque(dn[1])
+        out[:, :, k] = (tu - td) / (2 * h)
+    return out
 
 
 def payload_unit_torque(model, q, qd, qdd, offset) -> np.ndarray:

@@ -27,10 +27,15 @@ from .bagdata import RunData
 
 @dataclass(frozen=True)
 class ResidualConfig:
-    """window_s [s] SG window, sg_order, v_min [rad/s], command_lag_samples, period_s [s]."""
+    """window_s [s] SG window (upper bound), sg_order, v_min [rad/s], command_lag_samples,
+    period_s [s], edge_s [s]; the window adapts to the excitation: at most
+    ``window_per_reversal`` times the median time between velocity reversals of the run, at
+    least ``min_window_s`` (see ``smoothing_window``)."""
 
     window_s: float = 0.1
     sg_order: int = 3
+    min_window_s: float = 0.03
+    window_per_reversal: float = 0.25
     v_min: float = 0.01
     command_lag_samples: int = 4
     period_s: float = 0.004032
@@ -71,13 +76,43 @@ def _odd_window(window_s: float, period_s: float, n: int, order: int) -> int:
     return max(order + 2 | 1, min(w, (n - 1) | 1 if n % 2 == 0 else n))
 
 
+def reversal_interval(t: np.ndarray, qd: np.ndarray, v_min: float) -> float | None:
+    """Median time [s] between velocity reversals over the joints of a run (None: no joint
+    reverses twice). A reversal: the sign of qd changes between two samples with |qd| > v_min
+    (slow samples in between are skipped)."""
+    gaps = []
+    for j in range(qd.shape[1]):
+        fast = np.abs(qd[:, j]) > v_min
+        if fast.sum() < 2:
+            continue
+        s = np.sign(qd[fast, j])
+        tr = t[fast][1:][s[1:] != s[:-1]]
+        gaps.extend(np.diff(tr).tolist())
+    return float(np.median(gaps)) if gaps else None
+
+
+def smoothing_window(t: np.ndarray, qd_raw: np.ndarray, config: 'ResidualConfig'
+                     ) -> tuple[float, float | None]:
+    """(window [s], median reversal interval [s] or None): the configured window, shrunk to
+    ``window_per_reversal`` x the reversal interval for fast-reversal excitation (an SG window
+    across a reversal smears the friction jump into the residual), not below min_window_s."""
+    rev = reversal_interval(t, qd_raw, config.v_min)
+    w = config.window_s
+    if rev is not None:
+        w = min(w, max(config.min_window_s, config.window_per_reversal * rev))
+    return w, rev
+
+
 def prepare_run(run: RunData, model, friction, config: ResidualConfig = ResidualConfig(),
                 t_origin: float = 0.0) -> Channels:
     """Channels of one run for the nominal ``model`` (RobotModel) and ``friction`` map."""
     c = config
     T = float(np.median(np.diff(run.t))) if len(run.t) > 1 else c.period_s
     n = len(run.t)
-    w = _odd_window(c.window_s, T, n, c.sg_order)
+    if n < 2 * c.sg_order + 3:
+        raise ValueError(f'bag {run.name}: only {n} joint states')
+    window_s, rev = smoothing_window(run.t, run.qd, c)
+    w = _odd_window(window_s, T, n, c.sg_order)
     # One linear filter L (SG smoothing) on both sides of M qdd + n = tau: the derivatives
     # are central differences of L(q) = L(differences of q); the second difference of the
     # samples matches the mean torque over [t_{k-1}, t_{k+1}) = (e_k + e_{k+1}) / 2.
@@ -92,10 +127,21 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
     tau_rigid = np.array([model.inverse_dynamics(a, b, d) for a, b, d in zip(q, qd, qdd)])
     tau_f = friction.torque(qd)
     r_tau = effort - tau_rigid - tau_f
-    # moving: sliding and no sign change within half a window
+    # effort noise seen by the residual: high-pass part of the raw effort times the
+    # smoother's white-noise gain (a floor for the torque channel)
+    from scipy.signal import savgol_coeffs
+    gain = float(np.linalg.norm(savgol_coeffs(w, c.sg_order)))
+    hp = e_mid - effort
+    mad = np.median(np.abs(hp - np.median(hp, axis=0)), axis=0) * 1.4826
+    noise = mad / max(np.sqrt(max(1.0 - gain**2, 1e-6)), 1e-3) * gain
+    # moving: sliding and no slow sample or sign change (smoothed or measured speed) within
+    # half a window
     half = w // 2
     slide = np.abs(qd) > c.v_min
-    bad = ~slide
+    flip = np.zeros_like(slide)
+    for v in (qd, run.qd):
+        flip[1:] |= np.sign(v[1:]) != np.sign(v[:-1])
+    bad = ~slide | flip
     k = np.ones(2 * half + 1)
     near_stop = np.stack([np.convolve(bad[:, j].astype(float), k, 'same') > 0
                           for j in range(3)], axis=1)
@@ -120,8 +166,19 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
         pred = np.stack([np.interp(eff_t - c.command_lag_samples * T, run.cmd_t,
                                    run.cmd[:, j]) for j in range(3)], axis=1)
         r_cmd = eff - pred
+        if len(r_cmd) > 4 * w:
+            # the reported effort's own noise, free of the torque signal: high-pass part of
+            # effort - cmd(t - L T) (the nominal pipeline takes the signal out)
+            hpc = r_cmd - savgol_filter(r_cmd, w, c.sg_order, axis=0)
+            madc = np.median(np.abs(hpc - np.median(hpc, axis=0)), axis=0) * 1.4826
+            raw = madc / max(np.sqrt(max(1.0 - gain**2, 1e-6)), 1e-3)
+            noise = np.minimum(noise, raw * gain)
     else:
         eff_t, eff, r_cmd = np.empty(0), np.empty((0, 3)), np.empty((0, 3))
     return Channels(run.name, run.t, q, qd, qdd, effort, tau_rigid, tau_f, r_tau, moving,
                     cam_t, cam_q, cam_tau, r_tcp, run.cmd_t, run.cmd, eff_t, eff, r_cmd,
-                    t_origin, {'period_s': T, 'window': w})
+                    t_origin, {'period_s': T, 'window': w, 'window_s': w * T,
+                               'reversal_interval_s': rev,
+                               'window_adapted': window_s < c.window_s,
+                               'effort_noise_nm': noise.tolist(),
+                               'effort_noise_raw_nm': (noise / gain).tolist()})
