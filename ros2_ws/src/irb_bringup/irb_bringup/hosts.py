@@ -169,17 +169,19 @@ class Cell:
         self._up = True
         _run(_IP, 'link', 'set', self.bridge, 'up')
 
-    def add_host(self, name: str, delay_ms: float = 0.0, loss: float = 0.0) -> Host:
+    def add_host(self, name: str, delay_ms: float = 0.0, loss: float = 0.0,
+                 emulate: bool = False) -> Host:
         """A namespace linked to the bridge; ``delay_ms`` and ``loss`` apply to each direction
         of its link: a message from host A to host B meets A's and B's link, so a round trip
-        from a delayed host to an undelayed one takes 2 x delay_ms longer."""
+        from a delayed host to an undelayed one takes 2 x delay_ms longer. ``emulate``: use
+        the delaying link even at 0 ms and no loss (to measure what the emulation costs)."""
         i = len(self.hosts) + 1
         ns = f'irb{self.tag}_{name}'
         inner, outer = f'irb{self.tag}h{i}', f'irb{self.tag}b{i}'
         host = Host(name, ns, inner, f'{self.subnet}.{i + 1}', delay_ms, loss)
         self.hosts[name] = host
         _run(_IP, 'netns', 'add', ns)
-        emulate = bool(delay_ms or loss)
+        emulate = emulate or bool(delay_ms or loss)
         kind = link_emulation() if emulate else 'veth'
         if kind is None:
             raise RuntimeError('no way to delay a link here: tc netem missing and no '

@@ -117,14 +117,23 @@ def state_qos() -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
+# 248 Hz publishers keep the last 100 samples (0.4 s, ~30 kB per topic): what a reliable reader
+# across a lossy link (the recorder on another host) can still have resent. Measured with the
+# recorder behind 1 ms / 1 % links (irb_bringup/test/test_hosts.py): depth 1 lost 13-18 of
+# ~1700 joint states per run (each lost packet is gone), depth 100 none while the recorder
+# kept up. Keep-last never blocks the publisher, whatever the depth.
+STATE_PUB_DEPTH = 100
+
+
 def state_pub_qos() -> QoSProfile:
-    """Publishers of the 248 Hz state and command topics: reliable, keep last 1, volatile.
-    A reliable writer matches both best-effort readers (the loop: ``state_qos``, served
-    without acknowledgements or resends) and reliable ones (the ROS default of ``ros2 topic
-    echo``, rqt and user nodes; a best-effort writer gives those only an incompatible-QoS
-    warning). Keep-last 1 never blocks ``publish``: a reader that falls behind skips
-    samples instead of slowing the loop."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+    """Publishers of the 248 Hz state and command topics: reliable, keep last
+    ``STATE_PUB_DEPTH``, volatile. A reliable writer matches both best-effort readers (the
+    loop: ``state_qos``, served without acknowledgements or resends) and reliable ones (the
+    ROS default of ``ros2 topic echo``, rqt, user nodes, the recorder; a best-effort writer
+    gives those only an incompatible-QoS warning). Keep-last never blocks ``publish``: a
+    reader that falls further behind than the depth skips samples instead of slowing the
+    loop."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STATE_PUB_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 
