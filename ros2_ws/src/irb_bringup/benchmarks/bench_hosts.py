@@ -7,8 +7,9 @@ writes results/bench_hosts.json. Needs root and `source scripts/env.sh`.
     sudo -E nice -n 10 python benchmarks/bench_hosts.py [--duration 15] [--repeats 2]
 
 Cases: `same_host` (simulator + pdplus in one namespace), `same_host_remote_recorder` (the
-same, plus a recorder on a third host behind a 1 ms / 1 % link: a reliable reader of the loop
-topics across a lossy network), `hosts_0ms` (pdplus on a second host, veth link),
+same, plus a recorder on a third host behind a 10 ms / 1 % link: a reliable reader of the loop
+topics across a lossy network; its delivery latency and missing samples from its bag),
+`hosts_0ms` (pdplus on a second host, veth link),
 `hosts_0ms_emulated` (the same through linkemu at 0 ms: the emulator's own cost, only where
 netem is missing), `hosts_1ms`, `hosts_5ms` (one-way delay on pdplus's link, each direction:
 the round trip grows by 2 x delay). pdplus runs its built-in 10 s circle (auto_enable). The
@@ -29,6 +30,7 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / 'results'
+REC_DELAY_MS, REC_LOSS = 10.0, 0.01          # the recorder's link: the issue's network
 
 
 def _ros2_run(pkg, exe, params):
@@ -64,10 +66,12 @@ def _case(name, duration, rt, domain, tmp: Path) -> dict:
                                               start_new_session=True))
             start(ctl, _ros2_run('irb_control', 'pdplus', {
                 'realtime_priority': rt, 'profile_duration_s': 10.0}), 'pdplus')
+            bag = None
             if name == 'same_host_remote_recorder':
-                cell.add_host('rec', delay_ms=1.0, loss=0.01)
+                cell.add_host('rec', delay_ms=REC_DELAY_MS, loss=REC_LOSS)
+                bag = tmp / 'bags' / f'{name}_{time.time_ns()}'
                 start('rec', _ros2_run('irb_identification', 'recorder', {
-                    'root': str(tmp / 'bags'), 'name': f'{name}_{time.time_ns()}',
+                    'root': str(bag.parent), 'name': bag.name,
                     'recover_on_start': False}), 'recorder')
             start('sim', _ros2_run('irb_control', 'simulator', {
                 'mode': 'realtime', 'realtime_priority': rt, 'stats_path': str(stats)}),
@@ -77,8 +81,10 @@ def _case(name, duration, rt, domain, tmp: Path) -> dict:
             while time.monotonic() - t0 < duration and all(p.poll() is None for p in procs):
                 time.sleep(0.2)       # a benchmark's wall-clock window, not a test wait
         finally:
-            # what pdplus said while the loop ran (stopping the simulator trips its watchdog)
+            # what the nodes said while the loop ran (stopping the simulator trips pdplus's
+            # watchdog): safe stops, latched errors
             pd_log = (tmp / f'{name}_pdplus.log').read_text(errors='replace').splitlines()
+            sim_log = (tmp / f'{name}_simulator.log').read_text(errors='replace').splitlines()
             sim_first = procs[-1:] + procs[:-1]
             for p in sim_first:      # simulator first: its statistics end while pdplus runs
                 if p.poll() is None:
@@ -92,9 +98,11 @@ def _case(name, duration, rt, domain, tmp: Path) -> dict:
                 log.close()
     s = json.loads(stats.read_text()) if stats.exists() else {}
     stops = [ln.split(']: ', 1)[-1] for ln in pd_log
-             if 'stop' in ln.lower() or 'watchdog' in ln.lower()][:3]
+             if any(w in ln.lower() for w in ('stop', 'watchdog', 'error'))][:3]
+    faults = [ln.split(']: ', 1)[-1] for ln in sim_log if 'latched' in ln.lower()][:2]
     steps = max(int(s.get('steps', 0)), 1)
-    return {'case': name, 'link': link, 'one_way_delay_ms': delay,
+    remote = _remote_delivery(bag) if bag is not None else None
+    return {'remote_recorder': remote,'case': name, 'link': link, 'one_way_delay_ms': delay,
             'latency_ms': s.get('latency_ms'), 'steps': s.get('steps'),
             'answered': s.get('answered'),
             'missed_deadlines': s.get('missed_deadlines'),
@@ -102,7 +110,35 @@ def _case(name, duration, rt, domain, tmp: Path) -> dict:
             'max_consecutive_missed': s.get('max_consecutive_missed'),
             'stale_commands_ignored': s.get('stale_commands_ignored'),
             'state_publish_late_ms': s.get('state_publish_late_ms'),
-            'pdplus_stop_lines': stops, 'load_average_at_start': load0}
+            'pdplus_stop_lines': stops, 'simulator_fault_lines': faults,
+            'load_average_at_start': load0}
+
+
+def _remote_delivery(bag: Path) -> dict:
+    """/joint_states as the recorder on the third host got them: delivery latency (its
+    receive time, the bag's log time, minus the simulator's stamp: one machine, one clock) and
+    the samples missing between the first and the last."""
+    import numpy as np
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    from irb_identification.bagio import BagError, read_messages
+    try:
+        m = read_messages(bag, ['/joint_states'])['/joint_states']
+    except BagError as exc:
+        return {'error': str(exc)}
+    stamps = np.array([(lambda h: h.stamp.sec + 1e-9 * h.stamp.nanosec)(
+        deserialize_message(b, JointState).header) for b in m.data])
+    lat = (np.array(m.t_ns) * 1e-9 - stamps) * 1e3
+    steps = np.round(np.diff(np.sort(stamps)) / 0.004032).astype(int)
+    return {'link_one_way_delay_ms': REC_DELAY_MS, 'link_loss': REC_LOSS,
+            'received': int(stamps.size), 'missing': int(np.sum(np.maximum(steps - 1, 0))),
+            'delivery_latency_ms': {'p50': float(np.percentile(lat, 50)),
+                                    'p99': float(np.percentile(lat, 99)),
+                                    'max': float(lat.max())},
+            'delivery_latency_ms_second_half': {
+                'p50': float(np.percentile(lat[lat.size // 2:], 50)),
+                'p99': float(np.percentile(lat[lat.size // 2:], 99))}}
 
 
 def _summary(runs: list[dict]) -> dict:
@@ -119,8 +155,14 @@ def _summary(runs: list[dict]) -> dict:
             'missed_fraction_runs': [round(r['missed_fraction'], 4) for r in rs],
             'answered_fraction_runs': [round((r['answered'] or 0) / max(r['steps'] or 1, 1), 4)
                                        for r in rs],
-            'stopped_runs': sum(bool(r['pdplus_stop_lines']) for r in rs),
+            'stopped_runs': sum(bool(r['pdplus_stop_lines'] or r['simulator_fault_lines'])
+                                for r in rs),
+            'first_stop_or_fault': next((r['simulator_fault_lines'][:1] + r['pdplus_stop_lines']
+                                         for r in rs if r['pdplus_stop_lines']
+                                         or r['simulator_fault_lines']), []),
         }
+        if rs[0]['remote_recorder'] is not None:
+            out[name]['remote_recorder_runs'] = [r['remote_recorder'] for r in rs]
     return out
 
 

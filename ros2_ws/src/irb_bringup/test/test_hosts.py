@@ -81,10 +81,12 @@ def test_link_delay_seen_by_plain_udp():
         cell.add_host('a')
         cell.add_host('b')
         cell.add_host('c', delay_ms=2.0)
-        near = np.median(cell.udp_rtt_ms('a', 'b'))
-        far = np.median(cell.udp_rtt_ms('a', 'c'))
-    assert near < 1.0, near
-    assert 4.0 <= far < 4.0 + 2.5, far           # 2 x 2 ms + forwarding on a loaded machine
+        near = cell.udp_rtt_ms('a', 'b')
+        far = cell.udp_rtt_ms('a', 'c')
+    # the fastest of 20 round trips: load on the shared machine only ever adds to it
+    assert len(near) >= 18 and len(far) >= 18
+    assert min(near) < 1.0, near
+    assert 4.0 <= min(far) < 4.0 + 2.0, far          # 2 x 2 ms + user-space forwarding
 
 
 class _Lines:

@@ -74,6 +74,8 @@ def summary(resp: PlanPath.Response) -> str:
 def main(args=None):
     argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
     a = parse_args(argv)
+    from irb_description.node_main import refuse_insecure_start
+    refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
     rclpy.init(args=args)
     node = rclpy.create_node('plan_cli')
     executor = SingleThreadedExecutor()
