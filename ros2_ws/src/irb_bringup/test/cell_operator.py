@@ -1,7 +1,7 @@
 """The operator's workstation in the multi-host test: asks the planner for the thesis circle,
 waits for pdplus's verdict, enables pdplus and watches the motion to its end (all through
 irb_bringup.thesis_run.Link, the main job's own client). One JSON line per command read from
-stdin ('plan', 'enable', 'quit'); run on a host with `ip netns exec`."""
+stdin ('plan', 'enable', 'start', 'wait_end', 'quit'); run on a host with `ip netns exec`."""
 import json
 import sys
 
@@ -14,6 +14,19 @@ MODE_PATH, MODE_STOPPED, MODE_HOLD = 2, 4, 5
 
 def say(**kw):
     print(json.dumps(kw), flush=True)
+
+
+def enable(link):
+    """Across hosts pdplus may not have the simulator's (latched) axis status yet when asked:
+    it refuses with "no axis status yet"; ask again (bounded) once it has."""
+    for _ in range(100):
+        try:
+            return link.enable(None)
+        except RuntimeError as exc:
+            if 'no axis status yet' not in str(exc):
+                raise
+            link.spin_until(lambda: False, 0.3)
+    link.enable(None)
 
 
 def main():
@@ -32,10 +45,17 @@ def main():
                 say(step='plan', points=len(resp.trajectory.points), duration=resp.duration,
                     verdict=ok, accepted=bool(ok and st.accepted), reason=st.reason if ok else '')
             elif cmd == 'enable':
-                link.enable(None)
+                enable(link)
                 done = link.spin_until(lambda: MODE_PATH in link.modes
                                        and link.modes[-1] in (MODE_STOPPED, MODE_HOLD), 60)
                 say(step='enable', done=done, modes=link.modes, stop_reason=link.stop_reason)
+            elif cmd == 'start':            # enable, answer once the path is running
+                enable(link)
+                ok = link.spin_until(lambda: MODE_PATH in link.modes, 60)
+                say(step='start', moving=ok, modes=link.modes)
+            elif cmd == 'wait_end':
+                done = link.spin_until(lambda: link.modes[-1] in (MODE_STOPPED, MODE_HOLD), 60)
+                say(step='wait_end', done=done, modes=link.modes, stop_reason=link.stop_reason)
             elif cmd == 'quit':
                 break
     except Exception as exc:  # noqa: BLE001 - one line for the test to show

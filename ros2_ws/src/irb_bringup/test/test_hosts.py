@@ -257,3 +257,46 @@ def test_circle_across_three_hosts(tmp_path):
     s = json.loads(stats.read_text())
     moving = [m.header.stamp for m in cs if int(m.mode) in (1, 2)]
     assert s['answered'] >= len(moving) > 6.0 / PERIOD, s
+
+
+@needs_hosts
+@pytest.mark.slow
+@pytest.mark.ros
+def test_link_failure_between_simulator_and_pdplus_stops_with_the_reason(tmp_path):
+    """The loop split over two hosts (simulator on `robot`, pdplus and the operator on `rt`):
+    the link of `robot` goes down in the middle of the circle; pdplus's watchdog stops the
+    motion and says why (the stop reason on controller_state, seen on `rt`)."""
+    from irb_control.process_group import ProcessGroup, ProcessSpec, ros2_run_cmd
+    env = hosts.host_env(int(os.environ.get('ROS_DOMAIN_ID', '0')))
+    lines = _Lines()
+    group = operator = None
+    with hosts.Cell() as cell:
+        try:
+            robot = cell.add_host('robot')
+            cell.add_host('rt')
+
+            def spec(name, host, argv):
+                return ProcessSpec(name, tuple(cell.wrap(host, argv)), True, env)
+            group = ProcessGroup([
+                spec('simulator', 'robot', ros2_run_cmd('irb_control', 'simulator', params={
+                    'mode': SIM_MODE})),
+                spec('pdplus', 'rt', ros2_run_cmd('irb_control', 'pdplus', params={
+                    'auto_enable': False, 'use_sim_time': SIM_MODE == 'lockstep',
+                    'profile_duration_s': 10.0}))], log=lambda m: None, stream=lines)
+            group.start()
+            operator = _Operator(cell.wrap('rt', [sys.executable, str(HERE / 'cell_operator.py')]),
+                                 dict(os.environ, PYTHONUNBUFFERED='1', **env))
+            started = operator.ask('start', 120)
+            assert started.get('moving'), (started, lines.tail())
+            # the cable is pulled: the robot host's interface goes down
+            subprocess.run(cell.wrap(robot, ['ip', 'link', 'set', robot.ifname, 'down']),
+                           check=True, timeout=10)
+            end = operator.ask('wait_end', 90)
+            assert end.get('done') and end['modes'][-1] == 4, (end, lines.tail())
+            assert 'watchdog' in end['stop_reason'], end
+            assert lines.has('pdplus', 'watchdog'), lines.tail()
+        finally:
+            if operator is not None:
+                operator.close()
+            if group is not None:
+                group.stop()
