@@ -117,12 +117,14 @@ def state_qos() -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-# 248 Hz publishers keep the last 100 samples (0.4 s, ~30 kB per topic): what a reliable reader
-# across a lossy link (the recorder on another host) can still have resent. Measured with the
-# recorder behind 1 ms / 1 % links (irb_bringup/test/test_hosts.py): depth 1 lost 13-18 of
-# ~1700 joint states per run (each lost packet is gone), depth 100 none while the recorder
-# kept up. Keep-last never blocks the publisher, whatever the depth.
-STATE_PUB_DEPTH = 100
+# 248 Hz publishers keep the last 250 samples (1 s at 248 Hz, ~60 kB per topic): what a reliable
+# reader on another host (the recorder) can still have resent after a lost packet or a stall
+# of its own. Measured with the recorder behind 1 ms links (irb_bringup/test/test_hosts.py,
+# lockstep at ~700 states/s): at 1 % loss depth 1 lost 13-18 of ~1700 joint states per run
+# (a lost packet is gone), depth 100 0-2; at load 11 depth 100 once lost a burst of 33 (the
+# recorder fell behind by more than the depth), depth 250 none in 5 runs at load 9-11.
+# Keep-last never blocks the publisher, whatever the depth.
+STATE_PUB_DEPTH = 250
 
 
 def state_pub_qos() -> QoSProfile:
