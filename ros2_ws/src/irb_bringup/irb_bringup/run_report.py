@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from irb_control.pd_plus import MODE_PATH
+from irb_control.pd_plus import MODE_HOLD, MODE_PATH
 
 from irb_identification.bagio import read_messages, typestore
 from irb_identification.series import read_joint_series
@@ -63,6 +63,11 @@ def run_figures(bag: str | Path, label: str, center: np.ndarray, radius: float) 
     t_path = np.array([_stamp(m) for m in states if m.mode == MODE_PATH])
     if t_path.size < 2:
         raise ValueError(f'bag {bag}: the controller never followed the path (no MODE_PATH)')
+    if not any(m.mode == MODE_HOLD and _stamp(m) > t_path.max() for m in states):
+        # figures of a lap cut short would look plausible and be wrong (a shorter duration,
+        # less energy): refuse them
+        raise ValueError(f'bag {bag}: ends before the controller finished the path (no '
+                         'MODE_HOLD after MODE_PATH: the recorder stopped early or fell behind)')
     t0, t1 = t_path.min(), t_path.max()
     js = read_joint_series(bag)
     inside = (js.t >= t0) & (js.t <= t1)

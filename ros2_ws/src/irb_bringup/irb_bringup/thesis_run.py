@@ -236,13 +236,13 @@ def main(args=None) -> int:
                                             for t in ('/joint_states', '/controller_state',
                                                       '/camera/tcp')), 60):
                 raise RuntimeError(f'recorder for {label} did not subscribe')
-            def accepted():
-                st = link.plan_status
-                return st.accepted_count + st.refused_count if st is not None else 0
-            n_plans = accepted()
             plans[label] = link.plan(cfg, objective, friction, g)
-            # pdplus checks every plan (its plan gate) and says so on ~/plan_status
-            if not link.spin_until(lambda: accepted() > n_plans, 60, g):
+            stamp = plans[label].trajectory.header.stamp
+            # pdplus checks every plan (its plan gate) and says so on ~/plan_status; the verdict
+            # is the one about this plan (its stamp), not a count: each phase starts a new
+            # pdplus whose counters start at zero again
+            if not link.spin_until(lambda: link.plan_status is not None
+                                   and link.plan_status.plan_stamp == stamp, 60, g):
                 raise RuntimeError(f'pdplus gave no verdict on the {label} plan')
             if not link.plan_status.accepted:
                 raise RuntimeError(f'pdplus refused the {label} plan: '

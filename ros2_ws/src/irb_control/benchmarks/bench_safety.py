@@ -234,26 +234,30 @@ def bench_plans(window_s: float = 20.0) -> dict:
 
 
 # --- soak -------------------------------------------------------------------------------------
-def bench_soak(minutes: float, path: str, load: bool) -> dict:
+def bench_soak(minutes: float, path: str, load: bool, rt: int = 0) -> dict:
     g = Graph('soak')
+    rtp = (f'realtime_priority:={rt}',) if rt else ()
     loader = None
     if load:
         loader = subprocess.Popen([sys.executable, '-c', 'while True: pass'],
                                   start_new_session=True)
     bagroot = Path(tempfile.mkdtemp(prefix='soak_bags_'))
+    sim_stats = bagroot / 'simulator_stats.json'
+    load_start = [round(x, 2) for x in os.getloadavg()]
+    out = None
     try:
         if path == 'axis':
             sp, cp = _free_udp_ports(2)
             g.start('axis', 'irb_control', 'fake_axis_computer', f'state_port:={sp}',
                     f'command_port:={cp}')
             g.start('bridge', 'irb_control', 'axis_bridge', f'state_port:={sp}',
-                    f'command_port:={cp}')
+                    f'command_port:={cp}', *rtp)
             reset = 'axis_bridge/reset'
         else:
-            g.start('simulator', 'irb_control', 'simulator')
+            g.start('simulator', 'irb_control', 'simulator', f'stats_path:={sim_stats}', *rtp)
             reset = 'simulator/reset'
         g.start('pdplus', 'irb_control', 'pdplus', 'profile_duration_s:=10.0',
-                'auto_enable:=false')
+                'auto_enable:=false', *rtp)
         g.start('recorder', 'irb_identification', 'recorder', f'root:={bagroot}',
                 'name:=soak', 'split_period_s:=5.0')
         assert g.until(lambda: g.axis is not None and g.states, 90), 'graph did not come up'
@@ -291,16 +295,21 @@ def bench_soak(minutes: float, path: str, load: bool) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
         out = {'benchmark': f'soak: {path} path + pdplus + recorder, enabled again after '
                             'every motion', 'minutes': minutes, 'path': path,
-               'cpu_load_process': load, 'motions': motions, 'stops': len(stops),
+               'cpu_load_process': load, 'realtime_priority': rt, 'motions': motions, 'stops': len(stops),
                'stops_per_hour': len(stops) / hours if hours else None,
-               'stops_by_reason': reasons, 'stop_list': stops[:50]}
-        return _write(f'soak_{path}{"_loaded" if load else ""}', out)
+               'stops_by_reason': reasons, 'stop_list': stops[:50],
+               'load_average_1_5_15_min_at_start': load_start}
     finally:
         if loader is not None:
             os.killpg(loader.pid, signal.SIGKILL)
             loader.wait()
         g.close()
+        if out is not None and sim_stats.exists():
+            # the simulator's own view: how late its states went out (a stalled simulator
+            # process is a gap the watchdog sees), late commands it ignored
+            out['simulator'] = json.loads(sim_stats.read_text())
         subprocess.run(['rm', '-rf', str(bagroot)])
+    return _write(f'soak_{path}{"_loaded" if load else ""}{f"_rt{rt}" if rt else ""}', out)
 
 
 def main() -> None:
@@ -312,11 +321,13 @@ def main() -> None:
     s.add_argument('--minutes', type=float, default=30.0)
     s.add_argument('--path', choices=('sim', 'axis'), default='sim')
     s.add_argument('--load', action='store_true', help='keep one core busy meanwhile')
+    s.add_argument('--realtime-priority', type=int, default=0,
+                   help='SCHED_FIFO priority for the loop nodes (0 = normal scheduling)')
     a = ap.parse_args()
     if a.what == 'plans':
         bench_plans(a.window_s)
     else:
-        bench_soak(a.minutes, a.path, a.load)
+        bench_soak(a.minutes, a.path, a.load, a.realtime_priority)
 
 
 if __name__ == '__main__':

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # echo_floor beside this file
+
 RESULTS = Path(__file__).resolve().parent / 'results'
 MODES = ('none', 'nominal', 'file')
 MODE_LABEL = {'none': 'no FF', 'nominal': 'nominal FF', 'file': 'true-plant FF'}
@@ -56,13 +58,23 @@ def bench_loop(duration: float = 20.0, rt_priority: int = 20, repeats: int = 1) 
     (skipped, with the reason, when SCHED_FIFO is not permitted or rt_priority is 0). The
     first default run's figures are at the top level of loop.json, every default run's p99
     under 'default_runs', the realtime run's under 'realtime_priority_run'."""
-    runs = [_loop_run(duration, 0) for _ in range(max(repeats, 1))]
+    from echo_floor import measure as echo_floor
+    runs, echoes = [], []
+    for _ in range(max(repeats, 1)):
+        # the transport's floor right before each loop run, same duration: the machine's state
+        # moves p99 by +-0.2 ms, so only a ratio measured together compares like with like
+        echoes.append(echo_floor(duration))
+        runs.append(_loop_run(duration, 0))
     out = runs[0]
     p99 = [r['state_to_command_latency_ms (simulator side)']['p99'] for r in runs]
+    echo_p99 = [e['round_trip_ms']['p99'] for e in echoes]
+    out['echo_floor'] = echoes[0]
     out['default_runs'] = {
         'p99_ms': p99, 'p50_ms': [r['state_to_command_latency_ms (simulator side)']['p50']
                                   for r in runs],
         'missed_fraction': [r['missed_fraction'] for r in runs],
+        'echo_p99_ms': echo_p99,
+        'p99_loop_over_p99_echo': [a / b for a, b in zip(p99, echo_p99)],
         'goal_met': f"{sum(bool(r['goal_met']) for r in runs)} of {len(runs)}"}
     if rt_priority and _fifo_permitted():
         out['realtime_priority_run'] = _loop_run(duration, rt_priority)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .axis_protocol import (CYCLE_S, MODE_TORQUE, CommandPacket, ProtocolError,
+from .axis_protocol import (CYCLE_S, MODE_IDLE, MODE_TORQUE, CommandPacket, ProtocolError,
                             SequenceTracker, StatePacket, decode_state, encode_command)
 
 
@@ -103,6 +103,22 @@ class BridgeCore:
         self.stats.commands_sent += 1
         return encode_command(CommandPacket(self.last_state.seq, stamp_ns, tau, MODE_TORQUE,
                                             self._reset_pending, self.last_state.session))
+
+    def reset_command(self, now: float) -> bytes | None:
+        """A reset-only answer to the newest state while a reset is pending and that state
+        reports a latched error: zero torque, ``mode_request`` idle, reset = 1. After a fault
+        the controller is stopped and sends no commands, so a reset carried only by its commands
+        would never reach the axis computer (and the controller refuses to enable while the
+        error is latched). The axis computer clears the error and stays on its brakes; the next
+        torque command engages again. None when nothing is to be sent."""
+        st = self.last_state
+        if (not self._reset_pending or st is None or st.error == 0 or self._answered
+                or now - self._last_state_time > self.max_command_age_s):
+            return None
+        self._answered = True
+        self.stats.commands_sent += 1
+        return encode_command(CommandPacket(st.seq, 0, np.zeros(6), MODE_IDLE, True,
+                                            st.session))
 
     def check_link(self, now: float) -> str | None:
         """'lost' once when no valid state arrived for ``link_timeout_s``, else None."""

@@ -93,6 +93,11 @@ class AxisBridge(Node):
                 state, event = self.core.on_datagram(data, time.monotonic())
                 if state is not None:
                     self.last_key = stamp_ns
+                # a requested reset reaches the axis computer also while no controller
+                # commands (pdplus is stopped after the fault that latched the error)
+                reset = self.core.reset_command(time.monotonic())
+            if reset is not None:
+                self.sock.sendto(reset, self.peer)
             if event:
                 self.get_logger().info(f'link {event}: states arriving (seq {state.seq}, '
                                        f'session {state.session:#010x})')

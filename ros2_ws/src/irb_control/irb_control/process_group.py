@@ -35,6 +35,30 @@ def interrupt(proc: subprocess.Popen) -> None:
         pass
 
 
+def stop_sessions(procs: list, timeout_s: float = 10.0, log=None) -> None:
+    """Stop processes each started in a session of its own: SIGINT to every group (as a
+    terminal's Ctrl-C; `ros2 run` does not forward it), then SIGTERM, then SIGKILL, each
+    after ``timeout_s`` [s] (5 s for SIGKILL) for those still alive."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        alive = [p for p in procs if p.poll() is None]
+        if not alive:
+            break
+        for p in alive:
+            try:
+                os.killpg(p.pid, sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + (timeout_s if sig != signal.SIGKILL else 5.0)
+        for p in alive:
+            try:
+                p.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+        if log is not None and sig != signal.SIGINT and any(p.poll() is not None
+                                                            for p in alive):
+            log(f'needed {signal.Signals(sig).name} to stop some processes')
+
+
 def ros2_run_cmd(package: str, executable: str, params_file: str | None = None,
                  params: dict | None = None, remaps: dict | None = None,
                  node_name: str | None = None, extra: tuple[str, ...] = ()) -> tuple[str, ...]:
@@ -142,23 +166,4 @@ class ProcessGroup:
         return {name: p.returncode for name, p in self.procs.items()}
 
     def _stop(self, procs: list) -> None:
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [p for p in procs if p.poll() is None]
-            if not alive:
-                break
-            for p in alive:
-                # the whole session, as a terminal's Ctrl-C: `ros2 run` does not forward
-                # SIGINT, every process of the group gets it once
-                try:
-                    os.killpg(p.pid, sig)
-                except ProcessLookupError:
-                    pass
-            deadline = time.monotonic() + (self.stop_timeout_s if sig != signal.SIGKILL
-                                           else 5.0)
-            for p in alive:
-                try:
-                    p.wait(timeout=max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    pass
-            if sig != signal.SIGINT and any(p.poll() is not None for p in alive):
-                self.log(f'needed {signal.Signals(sig).name} to stop some processes')
+        stop_sessions(procs, self.stop_timeout_s, self.log)

@@ -7,8 +7,8 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from irb_control.axis_bridge_core import BridgeCore
-from irb_control.axis_protocol import (COMMAND_SIZE, CYCLE_S, STATE_SIZE, CommandPacket,
-                                       ProtocolError, StatePacket, decode_command,
+from irb_control.axis_protocol import (COMMAND_SIZE, CYCLE_S, MODE_IDLE, STATE_SIZE,
+                                       CommandPacket, ProtocolError, StatePacket, decode_command,
                                        SequenceTracker, decode_state, encode_command,
                                        encode_state, seq_newer)
 
@@ -145,6 +145,29 @@ def test_reset_is_repeated_until_the_axis_computer_reports_no_error():
         assert decode_command(b.on_command(np.zeros(6), 0.004 * seq + 0.001)).reset
     b.on_datagram(encode_state(state(4)), 0.016)                        # error cleared
     assert not decode_command(b.on_command(np.zeros(6), 0.017)).reset
+
+
+def test_a_reset_reaches_the_axis_computer_while_the_controller_is_silent():
+    # after a fault pdplus is stopped and sends nothing: the reset must not wait for its
+    # commands (the soak on the axis path stayed latched for minutes, enable refused)
+    def latched(seq):
+        s = state(seq)
+        s.error = 1
+        return encode_state(s)
+    b = BridgeCore()
+    b.on_datagram(latched(1), 0.0)
+    assert b.reset_command(0.001) is None                      # not requested
+    b.request_reset()
+    b.on_datagram(latched(2), 0.004)
+    cmd = decode_command(b.reset_command(0.0041))
+    assert cmd.reset and cmd.seq == 2 and cmd.mode_request == MODE_IDLE
+    assert not cmd.tau_ref.any()
+    assert b.reset_command(0.0042) is None                     # one answer per state
+    assert b.on_command(np.zeros(6), 0.0043) is None           # the state is answered
+    b.on_datagram(latched(3), 0.020)
+    assert b.reset_command(0.020 + 2 * CYCLE_S) is None        # too old to answer
+    b.on_datagram(encode_state(state(4)), 0.024)               # cleared: nothing more
+    assert b.reset_command(0.0241) is None
 
 
 def test_restart_of_the_axis_computer_is_followed_after_confirmation():

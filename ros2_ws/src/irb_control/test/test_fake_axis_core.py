@@ -80,6 +80,22 @@ def test_misses_engage_brakes_and_latch_until_reset(plant):
     assert any('reset' in e for e in core.events)
 
 
+def test_a_reset_only_command_clears_the_error_and_stays_on_the_brakes(plant):
+    # what the bridge sends for ~/reset while the controller is stopped: idle, zero, reset
+    core = engaged(plant, miss_limit=3)
+    for _ in range(3):
+        core.begin_cycle()
+        core.end_cycle()
+    assert core.error == ERR_COMM_TIMEOUT
+    core.begin_cycle()
+    core.on_datagram(command(core.seq, reset=True, mode=MODE_IDLE), CONTROLLER)
+    core.end_cycle()
+    state = decode_state(core.begin_cycle()[0][1])
+    assert core.error == ERR_NONE and state.error == ERR_NONE     # no ERR_BAD_COMMAND either
+    assert state.mode == MODE_IDLE and plant.braked
+    assert core.on_datagram(command(core.seq, hold_torque(plant)), CONTROLLER)  # engages again
+
+
 def test_no_timeout_before_external_control_is_engaged(plant):
     core = FakeAxisCore(plant, miss_limit=3)
     for _ in range(20):                        # controller not started yet

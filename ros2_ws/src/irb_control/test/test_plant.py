@@ -100,6 +100,34 @@ def test_command_timeout_engages_brakes(model, friction):
     assert not np.allclose(q_held, q0)
 
 
+def test_brakes_latch_until_the_error_is_cleared(model, friction):
+    # issue 14, defect 8: the simulator applied the last command for 50 ms and released its
+    # brakes on the next command, unlike the latching axis computer
+    cfg = PlantConfig(command_timeout_s=0.02)
+    p = Plant(model, friction, cfg)
+    hold = model.gravity(p.state.q)
+    for _ in range(5):
+        p.command(hold)
+        p.step()
+    assert not p.braked and not p.error
+    for _ in range(8):
+        p.step()                                   # the controller went silent
+    assert p.braked and 'no command' in p.error
+    q_held = p.state.q.copy()
+    for _ in range(10):                            # commands again: ignored, still braked
+        p.command(hold + 50.0)
+        p.step()
+    assert p.braked and p.rejected_latched == 10
+    assert_allclose(p.state.q, q_held)
+    assert_allclose(p.applied, 0.0)
+    assert 'no command' in p.clear_error() and not p.error
+    assert p.braked                                # the reset alone does not release
+    for _ in range(cfg.delay_samples + 1):         # a command releases them (after the delay)
+        p.command(hold)
+        p.step()
+    assert not p.braked
+
+
 def test_invalid_command_is_ignored(model, friction):
     p = Plant(model, friction)
     p.command(np.array([np.nan, 0.0, 0.0]))

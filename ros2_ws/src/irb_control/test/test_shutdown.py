@@ -15,6 +15,7 @@ import time
 import uuid
 
 import pytest
+from irb_control.process_group import stop_sessions
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -116,17 +117,13 @@ def test_ctrl_c_while_callbacks_run(tmp_path):
         ctrl = start('pdplus', 'auto_enable:=true', 'require_axis_status:=false', ns=ns)
         sim = start('simulator', f'stats_path:={tmp_path / f"s{k}.json"}', ns=ns)
         try:
-            before = ''.join(wait_for_line(sim, 'simulator:'))
-            wait_for_line(ctrl, '-> ramp')            # the loop is closed: commands flow
+            # the loop is closed: the simulator took a command (its brakes released)
+            before = ''.join(wait_for_line(sim, 'brakes released'))
             code, after = interrupt(sim, 1)
             assert_clean(code, before + after)
-            assert json.loads((tmp_path / f's{k}.json').read_text())['answered'] > 0
+            stats = json.loads((tmp_path / f's{k}.json').read_text())
+            # command callbacks ran (answers to the latest state, or late ones on a loaded
+            # machine, which the simulator ignores as the axis computer does)
+            assert stats['answered'] + stats['stale_commands_ignored'] > 0, stats
         finally:
-            for p in (sim, ctrl):
-                if p.poll() is None:
-                    os.killpg(p.pid, signal.SIGINT)
-                    try:
-                        p.wait(timeout=30)
-                    except subprocess.TimeoutExpired:
-                        os.killpg(p.pid, signal.SIGKILL)
-                        p.wait()
+            stop_sessions([sim, ctrl], 30.0)

@@ -266,6 +266,7 @@ class ExperimentsNode(Node):
             traj.header.stamp = self.get_clock().now().to_msg()
             pub.publish(traj)
             self._enable_when_accepted(executor, traj.header.stamp, deadline, name)
+            mon.enabled(mon.t_state)
             self._spin_until(executor, lambda: mon.finished, deadline,
                              f'{name}: run (phase {mon.phase})')
         finally:

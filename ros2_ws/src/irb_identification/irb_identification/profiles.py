@@ -20,6 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 
+#: shortest ramp of a sweep [s]: three control periods of 4.032 ms, so that every ramp spans
+#: samples of the trajectory message (at 8 rad/s^2 this matters below 0.097 rad/s)
+MIN_RAMP_S = 3 * 0.004032
+
+
 @dataclass(frozen=True)
 class ConstantVelocityProfile:
     """Eq. 4.1 on one joint: speed [rad/s], acceleration [rad/s^2], hold [s], periods."""
@@ -37,9 +42,14 @@ class ConstantVelocityProfile:
     @classmethod
     def for_speed(cls, speed: float, accel: float = 8.0, stroke_rad: float = 0.8,
                   hold_min_s: float = 0.6, hold_max_s: float = 4.0, periods: int = 1,
-                  settle_s: float = 0.5) -> 'ConstantVelocityProfile':
-        """Hold time stroke/speed clipped to [hold_min_s, hold_max_s] [s]."""
+                  settle_s: float = 0.5, min_ramp_s: float = MIN_RAMP_S
+                  ) -> 'ConstantVelocityProfile':
+        """Hold time stroke/speed clipped to [hold_min_s, hold_max_s] [s]; the acceleration is
+        lowered where the ramp c / a1 would be shorter than ``min_ramp_s`` [s]: a ramp shorter
+        than a control period is a velocity step between two samples of the trajectory, which
+        the declared accelerations do not explain (the controller's plan gate refuses it)."""
         hold = float(np.clip(stroke_rad / speed, hold_min_s, hold_max_s))
+        accel = min(float(accel), float(speed) / min_ramp_s) if min_ramp_s > 0 else accel
         return cls(float(speed), float(accel), hold, int(periods), float(settle_s))
 
     @property

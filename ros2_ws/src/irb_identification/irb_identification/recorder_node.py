@@ -162,6 +162,18 @@ class RecorderNode(Node):
             print(f'[recorder] {text}', file=sys.stderr)
 
 
+def drain(executor, node, quiet_s: float = 0.05, limit_s: float = 2.0) -> None:
+    """After a stop request: write what already arrived (a recorder that trails a fast graph,
+    e.g. a lockstep simulator on a loaded machine, has up to ``queue_depth`` messages per topic
+    waiting) until nothing came for ``quiet_s`` [s], at most ``limit_s`` [s]."""
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end and not node.failed:
+        before = sum(node.writer.counts.values())
+        executor.spin_once(timeout_sec=quiet_s)
+        if sum(node.writer.counts.values()) == before:
+            return
+
+
 def main(args=None):
     """Exit 0 after Ctrl-C (bag closed); 1 with one line when the bag cannot be created or
     writing fails (a full disk: the closed splits are kept)."""
@@ -180,6 +192,8 @@ def main(args=None):
             executor.add_node(node)
             # the signal ends the loop between callbacks (never inside a write)
             spin_until_signal(executor, until=lambda: bool(node.failed))
+            if not node.failed:
+                drain(executor, node)
     except ExternalShutdownException:
         pass
     except Exception:  # noqa: BLE001 - rclpy errors after Ctrl-C shut the context down

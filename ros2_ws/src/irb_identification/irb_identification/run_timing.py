@@ -8,7 +8,7 @@ the joint states the run's recorder has written::
     READY --start(t_pub)--> WAIT_START --RAMP/TIME stamped after t_pub--> RUNNING
     RUNNING --HOLD after TIME--> MARGIN --recorded joint state stamped >= t_hold + margin--> DONE
     any state after start --STOPPED--> FAILED (stop reason)
-    WAIT_START --no start within start_timeout_s of simulated time--> FAILED
+    WAIT_START --no start within start_timeout_s of simulated time after enabled()--> FAILED
 
 Only a motion that starts after the trajectory was published counts: right after publishing,
 pdplus still reports HOLD of the previous run (or runs something else). The caller makes sure
@@ -45,7 +45,9 @@ class RunMonitor:
     """One run's progress from controller states and recorded joint-state stamps.
 
     margin_s [s]: simulated time recorded after pdplus reaches HOLD; start_timeout_s [s]:
-    simulated time after publishing within which pdplus must start (RAMP or TIME).
+    simulated time after ``enabled`` within which pdplus must start (RAMP or TIME). Between
+    publishing and enable pdplus checks the plan (its plan gate, wall-clock work while a
+    lockstep simulator's time runs on): that wait is the caller's, bounded on the wall clock.
     Feed ``on_state`` with every controller state and ``on_recorded`` with the stamp of
     every recorded joint state (or the latest one); read ``phase``, ``error``, ``t_hold``.
     """
@@ -57,6 +59,7 @@ class RunMonitor:
     t_state: float | None = None       # stamp [s] of the latest controller state
     t_recorded: float | None = None    # stamp [s] of the latest recorded joint state
     t_publish: float | None = None
+    t_enable: float | None = None      # graph time when pdplus accepted enable
     t_start: float | None = None       # first RAMP/TIME after publishing
     t_time: float | None = None        # first TIME (the trajectory itself)
     t_hold: float | None = None
@@ -83,6 +86,11 @@ class RunMonitor:
         self.t_publish = float(t_publish)
         self.phase = WAIT_START
 
+    def enabled(self, t_enable: float) -> None:
+        """pdplus accepted enable when the graph's time was ``t_enable`` [s]: the start
+        timeout runs from here."""
+        self.t_enable = float(t_enable)
+
     def fail(self, text: str) -> None:
         """End the run as failed with ``text`` (first failure wins)."""
         if self.phase != FAILED:
@@ -103,9 +111,9 @@ class RunMonitor:
             if stamp > self.t_publish and mode in (MODE_RAMP, MODE_TIME):
                 self.t_start = stamp
                 self.phase = RUNNING
-            elif stamp - self.t_publish > self.start_timeout_s:
+            elif self.t_enable is not None and stamp - self.t_enable > self.start_timeout_s:
                 self.fail(f'pdplus did not start the trajectory within {self.start_timeout_s}'
-                          f' s of simulated time (mode {MODE_NAMES.get(mode, mode)}'
+                          f' s of simulated time after enable (mode {MODE_NAMES.get(mode, mode)}'
                           + (f': {stop_reason}' if stop_reason else '')
                           + '; rejected? auto_enable off? see the pdplus log)')
                 return

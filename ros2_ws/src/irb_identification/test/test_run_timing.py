@@ -76,9 +76,14 @@ def test_no_start_is_an_error_after_the_start_timeout_of_simulated_time():
     mon = RunMonitor(start_timeout_s=2.0)
     feed(mon, 0.0, 1.0, MODE_STOPPED, 'stop service')   # latched stop from before
     mon.start(mon.t_state)
-    feed(mon, 1.0, 2.9, MODE_STOPPED, 'stop service')    # STOPPED while waiting: not yet
+    # pdplus checks the plan (wall-clock work) while a lockstep simulator's time runs on:
+    # no timeout before enable was accepted (thesis_run failed so on a loaded machine)
+    feed(mon, 1.0, 30.0, MODE_STOPPED, 'stop service')
     assert mon.phase == WAIT_START
-    feed(mon, 2.9, 3.5, MODE_STOPPED, 'stop service')
+    mon.enabled(30.0)
+    feed(mon, 30.0, 31.9, MODE_STOPPED, 'stop service')  # STOPPED while waiting: not yet
+    assert mon.phase == WAIT_START
+    feed(mon, 31.9, 32.5, MODE_STOPPED, 'stop service')
     assert mon.phase == FAILED
     assert 'did not start' in mon.error and 'stop service' in mon.error
 

@@ -49,6 +49,8 @@ def main():
     ap.add_argument('--count', type=int, default=500)
     ap.add_argument('--grid', type=int, default=200)
     ap.add_argument('--seed', type=int, default=7)
+    ap.add_argument('--name', default='random',
+                    help='results/<name>.json (a partial re-run keeps the full one)')
     a = ap.parse_args()
     planner = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2))
     rng = np.random.default_rng(a.seed)
@@ -107,7 +109,7 @@ def main():
             print(f'[bench_random] {i}/{a.count} planned ({unreachable} unreachable drawn '
                   f'again), {dict(outcomes)}, {time.perf_counter() - t_start:.0f} s',
                   file=sys.stderr, flush=True)
-    dump('random', {
+    dump(a.name, {
         'count': a.count, 'grid': a.grid, 'seed': a.seed, 'outcomes': dict(outcomes),
         'unreachable_circles_redrawn': unreachable,
         'invalid_successes': outcomes['invalid success'],

@@ -103,6 +103,10 @@ class PlannerNode(Node):
                               'internal error of the planner while planning this request '
                               '(details in the planner log); please report it')
         messages.fill_response(response, result, nodes)
+        # a unique stamp per plan: the controller's verdict (pdplus ~/plan_status.plan_stamp)
+        # names the plan it is about; for a joint-trajectory controller a stamp of 'now' means
+        # 'start now', as a zero stamp does
+        response.trajectory.header.stamp = self.get_clock().now().to_msg()
         self.pub_traj.publish(response.trajectory)
         self.pub_theta.publish(messages.theta_profile_msg(result))
         self.pub_path.publish(messages.path_msg(result.request))

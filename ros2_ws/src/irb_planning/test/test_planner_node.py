@@ -91,6 +91,9 @@ def test_plan_latch_and_keep_serving_after_bad_requests(ros, model):
     executor.spin_until_future_complete(got_traj, timeout_sec=TIMEOUT)
     executor.spin_until_future_complete(got_theta, timeout_sec=TIMEOUT)
     assert got_traj.done() and len(got_traj.result().points) == len(pts)
+    # each plan carries its own stamp (pdplus's verdict names it), the same in the response
+    assert resp.trajectory.header.stamp.sec > 0
+    assert got_traj.result().header.stamp == resp.trajectory.header.stamp
     prof = messages.profile_from_msg(got_theta.result())
     assert prof['t'][-1] == pytest.approx(4.0, rel=1e-6)
     assert list(prof['theta_dot']) == pytest.approx(list(resp.theta_dot))
@@ -111,6 +114,7 @@ def test_plan_latch_and_keep_serving_after_bad_requests(ros, model):
         assert 'Name:' not in bad.message and 'Error' not in bad.message
     again = _call(client, executor, cli, _request(objective='trapezoid', duration=3.0))
     assert again.success, again.message
+    assert again.trajectory.header.stamp != resp.trajectory.header.stamp
     # energy: the message as played (quintic between points); baseline: the exact profile.
     # For a trapezoid request they are the same motion, apart from the interpolation (~1e-5)
     assert again.energy == pytest.approx(again.baseline_energy, rel=1e-4)
