@@ -77,7 +77,7 @@ class Link:
 
     def __init__(self):
         import rclpy
-        from irb_description.node_main import latched_qos, state_qos
+        from irb_description.node_main import latched_qos, refuse_insecure_start, state_qos
         from irb_interfaces.msg import ControllerState, PlanStatus
         from irb_interfaces.srv import PlanPath
         from rclpy.executors import SingleThreadedExecutor
@@ -85,6 +85,7 @@ class Link:
         self.rclpy = rclpy
         self.PlanPath = PlanPath
         self.ctx = rclpy.Context()
+        refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
         rclpy.init(context=self.ctx)
         self.node = rclpy.create_node('thesis_run', context=self.ctx)
         self.ex = SingleThreadedExecutor(context=self.ctx)

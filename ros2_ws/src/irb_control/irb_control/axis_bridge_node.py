@@ -17,7 +17,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, state_pub_qos, state_qos
 from irb_interfaces.msg import AxisStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -61,7 +61,7 @@ class AxisBridge(Node):
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((self.bind_address, self.state_port))
         self.sock.settimeout(0.05)
-        self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
+        self.pub_state = self.create_publisher(JointState, 'joint_states', state_pub_qos())
         self.pub_status = self.create_publisher(DiagnosticArray, 'axis_bridge/status', 10)
         self.pub_axis = self.create_publisher(AxisStatus, 'axis_status', latched_qos())
         self._axis_key = None

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, state_qos
+from irb_description.node_main import declare, latched_qos, run_node, state_pub_qos, state_qos
 from irb_description.path import CirclePath, load_path_file
 from irb_interfaces.msg import AxisStatus, ControllerState, PlanStatus
 from rclpy.node import Node
@@ -134,8 +134,9 @@ class PdPlusNode(Node):
         # nobody received, and ended in a safe stop)
         self._auto_enable_pending = bool(P['auto_enable'])
         self._settle = SettleGate(0.0 if sim_time else P['auto_enable_settle_s'], cfg.period_s)
-        self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_qos())
-        self.pub_state = self.create_publisher(ControllerState, 'controller_state', state_qos())
+        self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_pub_qos())
+        self.pub_state = self.create_publisher(ControllerState, 'controller_state',
+                                              state_pub_qos())
         self.create_subscription(JointState, 'joint_states', self.on_state_raw, state_qos(),
                                  raw=True)
         self.create_subscription(AxisStatus, 'axis_status', self.on_axis_status,

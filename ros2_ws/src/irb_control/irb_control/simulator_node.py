@@ -14,7 +14,8 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, running, state_qos
+from irb_description.node_main import (declare, latched_qos, run_node, running, state_pub_qos,
+                                       state_qos)
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -99,7 +100,7 @@ class SimulatorNode(Node):
         effects = load_plant_effects(p['plant_effects_file'] or ffile)
         self.plant = Plant(model, friction, self.config, effects)
         self.lockstep = p['mode'] == 'lockstep'
-        self.pub_state = self.create_publisher(JointState, 'joint_states', state_qos())
+        self.pub_state = self.create_publisher(JointState, 'joint_states', state_pub_qos())
         self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
                                              QoSProfile(depth=50))
         self.pub_clock = (self.create_publisher(Clock, '/clock', qos_profile_sensor_data)

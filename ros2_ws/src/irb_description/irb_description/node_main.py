@@ -4,12 +4,16 @@ QoS of the 248 Hz and latched topics, a spin loop that ends on a signal between 
 from __future__ import annotations
 
 import gc
+import os
 import signal
+import sys
 import threading
+from pathlib import Path
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -56,9 +60,17 @@ def init(args=None) -> None:
     and a KeyboardInterrupt raised inside a running callback is logged by the executor as a
     FATAL failure with its traceback. Here the first signal only sets the stop request that
     ``running()`` reports (so the loops end between callbacks); later ones are ignored."""
+    refuse_insecure_start()
     for s in _SIGNALS:
         signal.signal(s, _first_signal)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy_impl.RCLError as exc:
+        if not security_requested():
+            raise
+        # Enforce strategy: no keystore / enclave for this node -> one line, no traceback
+        _refuse(f'ROS_SECURITY_ENABLE=true but the security set-up failed: '
+                f'{str(exc).splitlines()[0]}')
 
 
 def _first_signal(signum, frame):
@@ -97,9 +109,34 @@ def declare(node: Node, name: str, default, description: str):
 
 
 def state_qos() -> QoSProfile:
-    """248 Hz state and command topics: best effort, keep last 1."""
+    """Subscriptions of the 248 Hz state and command topics (the control loop and its
+    observers): best effort, keep last 1 -- a lost sample is never resent (the next one,
+    4 ms later, is newer), nothing queues behind a slow link."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                       reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+# 248 Hz publishers keep the last 250 samples (1 s at 248 Hz, ~60 kB per topic): what a reliable
+# reader on another host (the recorder) can still have resent after a lost packet or a stall
+# of its own. Measured with the recorder behind 1 ms links (irb_bringup/test/test_hosts.py,
+# lockstep at ~700 states/s): at 1 % loss depth 1 lost 13-18 of ~1700 joint states per run
+# (a lost packet is gone), depth 100 0-2; at load 11 depth 100 once lost a burst of 33 (the
+# recorder fell behind by more than the depth), depth 250 none in 5 runs at load 9-11.
+# Keep-last never blocks the publisher, whatever the depth.
+STATE_PUB_DEPTH = 250
+
+
+def state_pub_qos() -> QoSProfile:
+    """Publishers of the 248 Hz state and command topics: reliable, keep last
+    ``STATE_PUB_DEPTH``, volatile. A reliable writer matches both best-effort readers (the
+    loop: ``state_qos``, served without acknowledgements or resends) and reliable ones (the
+    ROS default of ``ros2 topic echo``, rqt, user nodes, the recorder; a best-effort writer
+    gives those only an incompatible-QoS warning). Keep-last never blocks ``publish``: a
+    reader that falls further behind than the depth skips samples instead of slowing the
+    loop."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STATE_PUB_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 
 
@@ -108,6 +145,79 @@ def latched_qos() -> QoSProfile:
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+SECURITY_REFUSED_EXIT = 3
+
+
+def security_requested() -> bool:
+    """ROS_SECURITY_ENABLE=true (rcl's test: exactly the string 'true')."""
+    return os.environ.get('ROS_SECURITY_ENABLE', '') == 'true'
+
+
+def _prefixes() -> list[Path]:
+    seen, out = set(), []
+    for var in ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH'):
+        for d in os.environ.get(var, '').split(os.pathsep):
+            if d and d not in seen:
+                seen.add(d)
+                out.append(Path(d))
+    out.append(Path(sys.prefix))
+    return out
+
+
+def middleware_security_support(rmw: str | None = None) -> tuple[bool | None, str]:
+    """(supported, evidence) for DDS security in the RMW this process will load: False with
+    the evidence when the build says it has none, None when it cannot tell.
+
+    rmw_fastrtps: Fast DDS writes its build options into ``include/fastrtps/config.h``
+    (``HAVE_SECURITY``), and an rmw_fastrtps_shared_cpp compiled without security carries
+    the message it returns when a keystore is given ("doesn't have the security
+    libraries"). The PyPI wheels have HAVE_SECURITY 0; ROS 2 Jazzy's Debian packages 1."""
+    rmw = (rmw or os.environ.get('RMW_IMPLEMENTATION')
+           or rclpy.get_rmw_implementation_identifier())
+    if not rmw.startswith('rmw_fastrtps'):
+        return None, f'{rmw}: not inspected'
+    for prefix in _prefixes():
+        for lib in sorted((prefix / 'lib').glob('librmw_fastrtps_shared_cpp.so*')):
+            try:
+                if b"doesn't have the security libraries" in lib.read_bytes():
+                    return False, f'{lib} was built without DDS security'
+            except OSError:
+                continue
+        for header in (prefix / 'include' / 'fastrtps' / 'config.h',
+                       prefix / 'include' / 'fastdds' / 'config.h'):
+            try:
+                text = header.read_text()
+            except OSError:
+                continue
+            for line in text.splitlines():
+                parts = line.split()
+                if parts[:2] == ['#define', 'HAVE_SECURITY'] and len(parts) > 2:
+                    return parts[2] != '0', f'{header}: HAVE_SECURITY {parts[2]}'
+    return None, f'{rmw}: no build information found'
+
+
+def _refuse(text: str) -> None:
+    print(f'refusing to start: {text}', file=sys.stderr, flush=True)
+    raise SystemExit(SECURITY_REFUSED_EXIT)
+
+
+def refuse_insecure_start() -> None:
+    """Never run open when the user asked for security: with ROS_SECURITY_ENABLE=true a
+    middleware without DDS security ends the process with one line (exit 3), and rcl's
+    strategy is set to Enforce, so a missing keystore or enclave fails instead of falling
+    back to an unsecured participant (rcl's Permissive default does that). Called by
+    ``init``; tools that call rclpy.init themselves call it first."""
+    if not security_requested():
+        return
+    supported, evidence = middleware_security_support()
+    if supported is False:
+        _refuse(f'ROS_SECURITY_ENABLE=true but this middleware has no DDS security '
+                f'({evidence}); install ROS 2 with SROS2 support (README, "deployment on '
+                f'several machines") or unset ROS_SECURITY_ENABLE')
+    if os.environ.get('ROS_SECURITY_STRATEGY') != 'Enforce':
+        os.environ['ROS_SECURITY_STRATEGY'] = 'Enforce'
 
 
 def spin_until_signal(executor, timeout_sec: float = 0.1, until=None) -> None:

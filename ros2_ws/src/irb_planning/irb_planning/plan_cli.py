@@ -111,6 +111,8 @@ def main(args=None):
     except ValueError as exc:
         print(f'plan: {exc}', file=sys.stderr)
         return 1
+    from irb_description.node_main import refuse_insecure_start
+    refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
     rclpy.init(args=args)
     node = rclpy.create_node('plan_cli')
     executor = SingleThreadedExecutor()
