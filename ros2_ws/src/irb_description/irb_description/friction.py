@@ -17,6 +17,8 @@ function of joint speed v [rad/s] (thesis ch. 4). File schema (YAML, version 1):
           # torque offset [N m] (signed, acts at every speed); absent = coulomb, coulomb, 0
           coulomb_positive: 18.5   # F_c+ [N m], level for v > 0
           coulomb_negative: 17.5   # F_c- [N m], level for v < 0
+          static_positive: 24.0    # F_s+ [N m], breakaway for v > 0 (absent: F_s - F_c + F_c+)
+          static_negative: 24.0    # F_s- [N m] (absent: F_s - F_c + F_c-)
           offset: 0.3              # tau_0 [N m]
           # optional: polynomials of order 5-7 fitted per sign (eq. 4.8 data), coefficients in
           # increasing powers of v, used inside valid_range; outside it the parametric model.
@@ -29,11 +31,14 @@ function of joint speed v [rad/s] (thesis ch. 4). File schema (YAML, version 1):
           degenerate: true
           degenerate_reason: 'stribeck_velocity 3.6 rad/s beyond the top speed 0.09 rad/s'
 
-Parametric model, with e = exp(-(v / v_s)^2) and the Stribeck hump F_s - F_c shared by
-both signs:
+Parametric model, with e = exp(-(v / v_s)^2):
 
-    tau_f(v) = tau_0 + F_v v + (F_c+ + (F_s - F_c) e)    for v > 0
-    tau_f(v) = tau_0 + F_v v - (F_c- + (F_s - F_c) e)    for v < 0,   tau_0 at v = 0.
+    tau_f(v) = tau_0 + F_v v + (F_c+ + (F_s+ - F_c+) e)    for v > 0
+    tau_f(v) = tau_0 + F_v v - (F_c- + (F_s- - F_c-) e)    for v < 0,   tau_0 at v = 0.
+
+Without ``static_positive``/``static_negative`` the hump F_s - F_c is shared by both signs.
+Identified maps write F_s+ = F_s- = F_s (one breakaway level, Coulomb levels per sign: the
+plant's ``coulomb_asymmetry``), which is what lets an offset be told from an asymmetry.
 
 Maps without the optional fields (every map written before they existed) load unchanged:
 F_c+ = F_c- = F_c, tau_0 = 0 gives sign(v) (F_c + (F_s - F_c) e) + F_v v.
@@ -64,6 +69,8 @@ class JointFriction:
     ci95: dict = field(default_factory=dict)
     coulomb_positive: float | None = None     # None = coulomb
     coulomb_negative: float | None = None     # None = coulomb
+    static_positive: float | None = None      # None = static - coulomb + coulomb_positive
+    static_negative: float | None = None      # None = static - coulomb + coulomb_negative
     offset: float = 0.0
     degenerate_reason: str = ''               # '' = a trusted fit (or not identified at all)
 
@@ -81,7 +88,16 @@ class JointFriction:
     def symmetric(self) -> bool:
         """No asymmetry and no offset: the thesis's odd model."""
         return (self.coulomb_positive == self.coulomb == self.coulomb_negative
-                and self.offset == 0.0)
+                and self.offset == 0.0 and self.static_positive in (None, self.static)
+                and self.static_negative in (None, self.static))
+
+    def humps(self) -> tuple[float, float]:
+        """Stribeck humps F_s+ - F_c+ and F_s- - F_c- [N m]."""
+        hp = (self.static - self.coulomb if self.static_positive is None
+              else self.static_positive - self.coulomb_positive)
+        hn = (self.static - self.coulomb if self.static_negative is None
+              else self.static_negative - self.coulomb_negative)
+        return hp, hn
 
     def parametric(self, v: np.ndarray) -> np.ndarray:
         """Parametric tau_f(v) [N m] for speeds ``v`` [rad/s] (any shape)."""
@@ -89,8 +105,10 @@ class JointFriction:
         stribeck = (self.static - self.coulomb) * np.exp(-(v / self.stribeck_velocity) ** 2)
         if self.symmetric:
             return np.sign(v) * (self.coulomb + stribeck) + self.viscous * v
-        level = np.where(v > 0, self.coulomb_positive, self.coulomb_negative)
-        return np.sign(v) * (level + stribeck) + self.viscous * v + self.offset
+        e = np.exp(-(v / self.stribeck_velocity) ** 2)
+        hp, hn = self.humps()
+        level = np.where(v > 0, self.coulomb_positive + hp * e, self.coulomb_negative + hn * e)
+        return np.sign(v) * level + self.viscous * v + self.offset
 
     def torque(self, v: np.ndarray) -> np.ndarray:
         """tau_f(v) [N m]: the polynomials inside ``valid_range`` if given, else parametric."""
@@ -130,7 +148,7 @@ class FrictionMap:
 
         sign(v) is replaced by s = tanh(v / smoothing) [smoothing in rad/s] so the planner's
         NLP has continuous derivatives; the error is below 1e-6 N m for |v| > 10 smoothing.
-        Asymmetric levels: s ((F_c+ + F_c-)/2 + hump) + s^2 (F_c+ - F_c-)/2 (equal to the
+        Asymmetric levels L+-(v): s (L+ + L-)/2 + s^2 (L+ - L-)/2 (equal to the
         per-sign levels where |s| = 1, continuous through 0); the offset is added as it is.
         """
         import casadi as ca
@@ -142,9 +160,11 @@ class FrictionMap:
             if j.symmetric:
                 out.append(sgn * (j.coulomb + stribeck) + j.viscous * vi)
                 continue
-            mean = 0.5 * (j.coulomb_positive + j.coulomb_negative)
-            half = 0.5 * (j.coulomb_positive - j.coulomb_negative)
-            out.append(sgn * (mean + stribeck) + sgn * sgn * half + j.viscous * vi + j.offset)
+            e = ca.exp(-(vi / j.stribeck_velocity) ** 2)
+            hp, hn = j.humps()
+            lp, ln = j.coulomb_positive + hp * e, j.coulomb_negative + hn * e
+            out.append(sgn * 0.5 * (lp + ln) + sgn * sgn * 0.5 * (lp - ln) + j.viscous * vi
+                       + j.offset)
         return ca.vertcat(*out)
 
     def scaled(self, factor: float) -> 'FrictionMap':
@@ -153,6 +173,10 @@ class FrictionMap:
             replace(j, coulomb=j.coulomb * factor, static=j.static * factor,
                     viscous=j.viscous * factor, coulomb_positive=j.coulomb_positive * factor,
                     coulomb_negative=j.coulomb_negative * factor, offset=j.offset * factor,
+                    static_positive=None if j.static_positive is None
+                    else j.static_positive * factor,
+                    static_negative=None if j.static_negative is None
+                    else j.static_negative * factor,
                     polynomial_positive=None if j.polynomial_positive is None else tuple(
                         c * factor for c in j.polynomial_positive),
                     polynomial_negative=None if j.polynomial_negative is None else tuple(
@@ -169,6 +193,9 @@ class FrictionMap:
             if not j.symmetric:
                 d.update(coulomb_positive=float(j.coulomb_positive),
                          coulomb_negative=float(j.coulomb_negative), offset=float(j.offset))
+                for key in ('static_positive', 'static_negative'):
+                    if getattr(j, key) is not None:
+                        d[key] = float(getattr(j, key))
             if j.polynomial_positive is not None:
                 d['polynomial_positive'] = [float(c) for c in j.polynomial_positive]
             if j.polynomial_negative is not None:
@@ -214,6 +241,8 @@ def _joint_from_dict(name: str, d: dict, allow_degenerate: bool = False) -> Join
             coulomb_positive=float(d.get('coulomb_positive', coulomb)),
             coulomb_negative=float(d.get('coulomb_negative', coulomb)),
             offset=float(d.get('offset', 0.0)),
+            static_positive=(float(d['static_positive']) if 'static_positive' in d else None),
+            static_negative=(float(d['static_negative']) if 'static_negative' in d else None),
             degenerate_reason=(str(d.get('degenerate_reason') or 'degenerate')
                                if d.get('degenerate') else ''))
     except (KeyError, TypeError, ValueError) as exc:

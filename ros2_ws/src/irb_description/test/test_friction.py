@@ -141,3 +141,18 @@ def test_degenerate_joint_is_refused_unless_asked(tmp_path):
     with pytest.raises(FrictionMapError, match='degenerate.*v_s beyond the data'):
         load_friction_map(path)
     assert load_friction_map(path, allow_degenerate=True).joints[0].degenerate
+
+
+def test_per_sign_static_levels():
+    """Identified maps: one breakaway level F_s for both signs, Coulomb per sign."""
+    j = JointFriction(coulomb=10.0, static=14.0, stribeck_velocity=0.1, viscous=0.0,
+                      coulomb_positive=11.0, coulomb_negative=9.0, static_positive=14.0,
+                      static_negative=14.0, offset=0.0)
+    assert j.torque(1e-6) == pytest.approx(14.0)
+    assert j.torque(-1e-6) == pytest.approx(-14.0)
+    assert j.torque(0.1) == pytest.approx(11.0 + 3.0 * np.exp(-1))
+    assert j.torque(-0.1) == pytest.approx(-(9.0 + 5.0 * np.exp(-1)))
+    v = ca.SX.sym('v', 1)
+    f = ca.Function('f', [v], [FrictionMap(('j',), (j,)).casadi_torque(v)])
+    for s in (-0.3, -0.05, 0.05, 0.3):
+        assert float(f(s)) == pytest.approx(float(j.torque(s)), abs=1e-6)
