@@ -255,6 +255,15 @@ def speed_points(segments: list[Segment], rel_tol: float = 0.1
             warnings.append(f'speed {c:.4g} rad/s seen only with sign '
                             f'{"+" if pos else "-"}: no eq. 4.8 point')
             continue
+        lo = max(min(s.q_range[0] for s in pos), min(s.q_range[0] for s in neg))
+        hi = min(max(s.q_range[1] for s in pos), max(s.q_range[1] for s in neg))
+        span = min(max(s.q_range[1] for s in ss) - min(s.q_range[0] for s in ss)
+                   for ss in (pos, neg))
+        if hi - lo < 0.5 * span:
+            warnings.append(f'speed {c:.4g} rad/s: the +c and -c holds cover different '
+                            f'positions (overlap {max(hi - lo, 0.0):.3g} of {span:.3g} rad): '
+                            'eq. 4.8 would not cancel gravity, no point')
+            continue
 
         def wmean(ss, attr):
             w = np.array([s.samples for s in ss], float)
