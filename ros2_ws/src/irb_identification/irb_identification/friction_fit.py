@@ -93,6 +93,7 @@ class JointResult:
     sample: object = None                    # sample_fit.SampleFit of the samples method
     hold_time_s: float = 0.0                 # time in accepted constant-speed holds [s]
     degenerate: list[str] = field(default_factory=list)   # honesty-check failures
+    binned: tuple = ()                       # samples method: (speeds, mean torques) per bin
 
 
 def _parametric(v, fc, ds, vs, fv):
