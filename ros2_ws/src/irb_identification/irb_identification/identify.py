@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -163,8 +164,9 @@ def main(args=None) -> int:
         from .plots import plot_joint
         plot_dir.mkdir(parents=True, exist_ok=True)
         for r in results:
+            safe = re.sub(r'[^A-Za-z0-9_.-]+', '_', r.name)
             report['joints'][r.name]['plot'] = str(
-                plot_joint(r, plot_dir / f'{out.stem}_{r.name}.png'))
+                plot_joint(r, plot_dir / f'{out.stem}_{safe}.png'))
     failed = [r.name for r in results if r.error]
     degenerate = [r.name for r in results if r.degenerate]
     trusted = [r.name for r in results if not r.error and not r.degenerate]

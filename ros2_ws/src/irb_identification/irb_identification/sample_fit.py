@@ -356,8 +356,8 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
 
 
 def _symmetric_rmse(v, y, w, vs) -> float:
-    """Weighted RMS (over bins: ``w`` = counts) of the best symmetric model sign(v) (F_c + hump e) + F_v v (no offset,
-    no asymmetry; v_s as fitted, or none) on the same samples."""
+    """Weighted RMS (over bins: ``w`` = counts) of the best symmetric model
+    sign(v) (F_c + hump e) + F_v v (no offset, no asymmetry; v_s as fitted, or none)."""
     e = np.zeros_like(v) if vs is None else np.exp(-(v / vs) ** 2)
     sg = np.sign(v)
     X = np.column_stack([sg * (1 - e), sg * e, v]) if vs is not None else np.column_stack(
