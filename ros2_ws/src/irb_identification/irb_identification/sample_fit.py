@@ -55,7 +55,7 @@ class SampleFitConfig:
     huber_k [-]: Huber threshold in robust scales (1.4826 MAD); irls_iterations;
     block_s [s]: time blocks of the cluster-robust covariance (fewer than min_blocks blocks:
     the span is cut into min_blocks); search_bins: fine log-speed bins per balancing bin, on
-    whose weighted means v_s is searched (24 x 100: 0.2 % of speed each from 0.01 to 1 rad/s);
+    whose weighted means v_s is searched (24 x 400: 0.05 % of speed each, 0.01 to 1 rad/s);
     stribeck: try the Stribeck term at all."""
 
     v_min: float = 0.01
@@ -65,7 +65,7 @@ class SampleFitConfig:
     irls_iterations: int = 2
     block_s: float = 1.0
     min_blocks: int = 20
-    search_bins: int = 100
+    search_bins: int = 400
     balance_floor: float = float('inf')
     stribeck: bool = True
 
