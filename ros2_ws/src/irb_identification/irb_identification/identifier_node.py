@@ -18,6 +18,7 @@ import time
 from irb_description.node_main import declare, latched_qos, run_node, spin_until_signal
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -97,10 +98,15 @@ class IdentifierNode(Node):
         if not pubs:
             return
         qos = subscription_qos(pubs, int(self.p['queue_depth']))
+        if qos.reliability == ReliabilityPolicy.RELIABLE:
+            # keep all: a full queue is not acknowledged, so a reliable publisher (replay)
+            # waits for this node instead of losing what it cannot take yet
+            qos.history = HistoryPolicy.KEEP_ALL
         self.sub = self.create_subscription(
             _joint_state_class(), self.p['topic'], self._on_msg, qos, raw=True)
         self.get_logger().info(f'subscribed to {self.p["topic"]} '
-                               f'({qos.reliability.name.lower()}, depth {qos.depth})')
+                               f'({qos.reliability.name.lower()}, '
+                               f'{qos.history.name.lower()}, depth {qos.depth})')
 
     def _on_msg(self, data: bytes) -> None:
         self.core.add(data, time.time_ns(), time.monotonic())

@@ -15,6 +15,7 @@ import time
 import rclpy
 from irb_description.node_main import build_node, ignore_stop_signals, init, running
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -48,6 +49,9 @@ class ReplayNode(Node):
         self.reliable = bool(param('reliable', False, 'publish reliable whatever the recorded '
                                    'QoS (no loss to a matched reliable subscriber)'))
         self.depth = int(param('depth', 100, 'publisher queue depth (keep last)'))
+        self.drain_timeout = float(param('drain_timeout_s', 30.0, '[s] at the end, wait this '
+                                         'long at most for reliable subscribers to '
+                                         'acknowledge everything'))
         status_topic = param('status_topic', '/replay/status',
                              "latched end-of-stream status (std_msgs/String), '' = none")
         if not self.bag:
@@ -62,9 +66,10 @@ class ReplayNode(Node):
             if only and t not in only:
                 continue
             q = qos_from_dicts(qos.get(t, []), self.depth)
-            if self.reliable:
-                from rclpy.qos import ReliabilityPolicy
+            if self.reliable:       # keep all: wait for slow readers instead of dropping
+                from rclpy.qos import HistoryPolicy, ReliabilityPolicy
                 q.reliability = ReliabilityPolicy.RELIABLE
+                q.history = HistoryPolicy.KEEP_ALL
             self.pubs[t] = self.create_publisher(message_class(ty), t, q)
         counts = {t: c['count'] for t, c in bag_info(self.bag)['topics'].items()}
         self.counts = {t: int(counts.get(t, 0)) for t in self.pubs}
@@ -91,14 +96,20 @@ class ReplayNode(Node):
                        for p in self.pubs.values())):
             self.stop.wait(0.02)
 
-    def flush(self, timeout_s: float = 2.0) -> None:
-        """Wait (bounded) until reliable subscribers acknowledged every message and the
-        status: the process may exit right after."""
+    def flush(self) -> None:
+        """Wait (up to drain_timeout_s) until reliable subscribers acknowledged every message
+        and the status: the writer's queue dies with this process, and a slow reader (keep
+        all) has not taken everything yet when the last message is published."""
         from rclpy.duration import Duration
+        end = time.monotonic() + self.drain_timeout
         try:
             for pub in [*self.pubs.values(), self.status_pub]:
-                if pub is not None:
-                    pub.wait_for_all_acked(Duration(seconds=timeout_s))
+                while pub is not None and not pub.wait_for_all_acked(Duration(seconds=0.5)):
+                    if time.monotonic() > end:
+                        self.get_logger().warning(
+                            f'{pub.topic_name}: not every message acknowledged within '
+                            f'drain_timeout_s = {self.drain_timeout:g} s')
+                        break
         except Exception:  # noqa: BLE001 - context already shut down: nothing to wait for
             pass
 
@@ -108,7 +119,21 @@ class ReplayNode(Node):
                 state, self.bag, self.counts, self.published, reason)))
 
     def _publish(self, topic: str, data: bytes) -> None:
-        self.pubs[topic].publish(data)
+        """Publish; with ``reliable`` (keep all) a full queue makes the middleware refuse the
+        message after its blocking time: then retry, so playback goes as fast as the slowest
+        reliable subscriber takes messages (bounded by drain_timeout_s per message)."""
+        end = None
+        while True:
+            try:
+                self.pubs[topic].publish(data)
+                break
+            except RCLError:
+                if not self.reliable or self.stop.is_set():
+                    raise
+                end = end or time.monotonic() + self.drain_timeout
+                if time.monotonic() > end:
+                    raise
+                self.stop.wait(0.002)
         self.published[topic] += 1
 
     def _publish_clock(self, t_ns: int) -> None:

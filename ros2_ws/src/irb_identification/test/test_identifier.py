@@ -200,3 +200,54 @@ def test_services_compute_and_reset(ctx, tmp_path):
     assert spin_until(executor, reset.service_is_ready, 30.0)
     fut = reset.call_async(Trigger.Request())
     assert spin_until(executor, fut.done, 30.0) and fut.result().success
+
+
+def _read_until(proc, needle, timeout):
+    """Lines of ``proc``'s merged output until one holds ``needle`` (select with a bound)."""
+    import select
+    lines, end = [], time.monotonic() + timeout
+    while time.monotonic() < end:
+        ready, _, _ = select.select([proc.stdout], [], [], max(end - time.monotonic(), 0))
+        if not ready:
+            break
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if needle in line:
+            return lines
+    raise AssertionError(f'{needle!r} not seen within {timeout} s: {"".join(lines)[-2000:]}')
+
+
+@pytest.mark.slow
+def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map, tmp_path,
+                                                          domain_id):
+    """`ros2 run` processes: replay at rate 0 (as fast as possible) with reliable keep-all
+    publishers into the identifier; the slower Python subscriber holds the replay back
+    instead of losing messages; the map equals the offline one."""
+    import os
+    import subprocess
+    bag, n_msgs, _ = sweep_bag
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    out = tmp_path / 'proc_map.yaml'
+    ident = subprocess.Popen(
+        ['ros2', 'run', 'irb_identification', 'identifier', '--ros-args', '-p',
+         f'out_map:={out}', '-p', 'joints:=[joint_3]', '-p', 'quiet_period_s:=20.0'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+        start_new_session=True)          # the ros2 launcher and the node: one group
+    try:
+        _read_until(ident, 'waiting for publishers', 60)
+        replay = subprocess.run(
+            ['ros2', 'run', 'irb_identification', 'replay', '--ros-args', '-p', f'bag:={bag}',
+             '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'reliable:=true'],
+            capture_output=True, text=True, env=env, timeout=180)
+        assert replay.returncode == 0, replay.stderr
+        lines = _read_until(ident, 'wrote', 120)
+        assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
+    finally:
+        os.killpg(ident.pid, __import__('signal').SIGINT)
+        assert ident.wait(timeout=30) == 0
+    got = load_friction_map(out)
+    for a, b in zip(got.joints, offline_map.joints):
+        np.testing.assert_allclose(a.torque(np.linspace(-2, 2, 41)),
+                                   b.torque(np.linspace(-2, 2, 41)), atol=1e-9)
