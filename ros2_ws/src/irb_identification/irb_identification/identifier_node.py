@@ -61,6 +61,8 @@ class IdentifierNode(Node):
             'progress_period_s': declare(self, 'progress_period_s', 5.0,
                                          '[s] progress log period, 0 = off'),
             'queue_depth': declare(self, 'queue_depth', 10000, 'subscription queue depth'),
+            'fill_nominal': declare(self, 'fill_nominal', False, "failed model joints from "
+                                    "irb_description's nominal map (said so in the source)"),
         }
         self.p = p
         name_map = {}
@@ -76,6 +78,7 @@ class IdentifierNode(Node):
             quiet_period_s=float(p['quiet_period_s']), allow_partial=bool(p['allow_partial']),
             torque_kind=p['torque_kind'], joints=[j for j in p['joints'] if j],
             name_map=name_map, out_map=p['out_map'], out_report=p['out_report'],
+            fill_nominal=bool(p['fill_nominal']),
             pipeline=PipelineConfig(
                 method=p['method'],
                 fit=FitConfig(min_speeds=int(p['min_speeds']),

@@ -60,7 +60,11 @@ def acceleration(t: np.ndarray, v: np.ndarray, window_s: float) -> np.ndarray:
     from scipy.signal import savgol_filter
     if len(t) < 5:
         return np.zeros_like(v)
-    dt = float(np.median(np.diff(t)))
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if not len(steps):
+        return np.zeros_like(v)
+    dt = float(np.median(steps))
     grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
     win = max(5, int(round(window_s / dt)) | 1)
     out = np.empty_like(v)

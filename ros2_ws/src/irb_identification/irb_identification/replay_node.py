@@ -35,7 +35,14 @@ class ReplayNode(Node):
             return self.declare_parameter(name, default, ParameterDescriptor(
                 description=text)).value
 
-        self.bag = param('bag', '', 'bag directory to play (required)')
+        self.bag = param('bag', '', "bag directory to play (required unless 'bags')")
+        self.bags = [b for b in param('bags', [''], 'several bags played one after the other '
+                                      "as one stream ('' = only 'bag')") if b]
+        if self.bag and self.bags:
+            raise BagError("give either 'bag' or 'bags', not both")
+        if self.bags:
+            self.bag = self.bags[0]
+        self.bags = self.bags or [self.bag]
         self.rate = float(param('rate', 1.0, 'speed factor; 0 = as fast as possible'))
         self.clock_on = param('clock', False, 'publish /clock (rosgraph_msgs/Clock) bag time')
         self.clock_hz = float(param('clock_frequency_hz', 100.0, '[Hz] /clock rate, bag time'))
@@ -71,8 +78,17 @@ class ReplayNode(Node):
                 q.reliability = ReliabilityPolicy.RELIABLE
                 q.history = HistoryPolicy.KEEP_ALL
             self.pubs[t] = self.create_publisher(message_class(ty), t, q)
-        counts = {t: c['count'] for t, c in bag_info(self.bag)['topics'].items()}
-        self.counts = {t: int(counts.get(t, 0)) for t in self.pubs}
+        self.counts = {t: 0 for t in self.pubs}
+        for b in self.bags:
+            other = bag_topics(b)
+            for t in self.pubs:
+                if t in other and other[t] != types[t]:
+                    raise BagError(f'bag {b}: {t} is {other[t]}, in {self.bag} {types[t]}')
+            for t, c in bag_info(b)['topics'].items():
+                if t in self.counts:
+                    self.counts[t] += int(c['count'])
+        self.label = self.bag if len(self.bags) == 1 else (
+            f'{self.bag} and {len(self.bags) - 1} more')
         self.published = {t: 0 for t in self.pubs}
         self.status_pub = None
         if status_topic:
@@ -116,7 +132,7 @@ class ReplayNode(Node):
     def publish_status(self, state: str, reason: str = '') -> None:
         if self.status_pub is not None:
             self.status_pub.publish(self._String(data=replay_status(
-                state, self.bag, self.counts, self.published, reason)))
+                state, self.label, self.counts, self.published, reason)))
 
     def _publish(self, topic: str, data: bytes) -> None:
         """Publish; with ``reliable`` (keep all) a full queue makes the middleware refuse the
@@ -166,13 +182,13 @@ class ReplayNode(Node):
 
     def _play(self) -> None:
         if self.verify:
-            n = verify_bag(self.bag)
-            self.get_logger().info(f'{self.bag}: {n} messages, CRCs valid')
+            n = sum(verify_bag(b) for b in self.bags)
+            self.get_logger().info(f'{self.label}: {n} messages, CRCs valid')
         self.publish_status('playing')
         self._wait_for_subscribers()
         self.stop.wait(self.start_delay)
-        msgs = (m for m in iter_messages(self.bag) if m[0] in self.pubs)
-        self.get_logger().info(f'playing {self.bag} at rate {self.rate or "max"}')
+        msgs = (m for b in self.bags for m in iter_messages(b) if m[0] in self.pubs)
+        self.get_logger().info(f'playing {self.label} at rate {self.rate or "max"}')
         self.stats = play(
             msgs, self._publish, self.rate,
             clock=self._publish_clock if self.clock_pub else None,

@@ -38,7 +38,8 @@ class StreamConfig:
     quiet_period_s [s]: no message for this long ends a stream (0 = only the replay's end
     signal or a service call); allow_partial: write a map from an incomplete stream (marked
     partial); torque_kind: friction or total; joints, name_map: as identify --joints,
-    --map-joint; out_map, out_report: where to write."""
+    --map-joint; out_map, out_report: where to write; fill_nominal: failed model joints
+    from the nominal map (as identify --fill-nominal)."""
 
     topic: str = '/joint_states'
     max_messages: int = 2_000_000
@@ -49,6 +50,7 @@ class StreamConfig:
     name_map: dict = field(default_factory=dict)
     out_map: str = 'identified_friction_map.yaml'
     out_report: str = ''
+    fill_nominal: bool = False
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
 
@@ -186,7 +188,11 @@ class StreamIdentifier:
             source = f'identified by the identifier node from {label}'
             if stream['partial']:
                 source = f'PARTIAL ({why_partial}): {source}'
-            fmap = friction_map(results, source)
+            fill = None
+            if cfg.fill_nominal and self.model is not None and all(
+                    r.name in self.model.joint_names for r in results):
+                fill = self.model.friction
+            fmap = friction_map(results, source, fill)
         except IdentificationError as exc:
             return self._fail(report, str(exc))
         out = Path(cfg.out_map)

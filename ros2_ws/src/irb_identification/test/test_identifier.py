@@ -251,3 +251,44 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
     for a, b in zip(got.joints, offline_map.joints):
         np.testing.assert_allclose(a.torque(np.linspace(-2, 2, 41)),
                                    b.torque(np.linspace(-2, 2, 41)), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_several_bags_as_one_stream(ctx, model, tmp_path):
+    """The main job's pairing: one bag per (joint, speed), replayed with ``bags`` as one
+    stream into the identifier: the offline identify's map within its intervals."""
+    from irb_identification.offline_sim import write_run_bag
+    bags, start = [], 1_700_000_000 * 10**9
+    for c in SPEEDS:                 # recorded one after the other: later stamps each
+        run = simulate(model, model.friction, ConstantVelocityProfile.for_speed(
+            c, stroke_rad=0.4), 2, config=SimConfig(velocity_noise=0.002, effort_noise=0.5,
+                                                   seed=9))
+        bags.append(write_run_bag(run, tmp_path / f'b_{c}', list(model.joint_names), start))
+        start += int(run.t[-1] * 1e9) + 10**9
+    off = tmp_path / 'off.yaml'
+    assert identify.main(sum((['--bag', str(b)] for b in bags), []) + [
+        '--out', str(off), '--no-plots', '--joints', 'joint_3']) == 0
+    offline = load_friction_map(off).joints[0]
+    context, executor = ctx
+    out = tmp_path / 'stream.yaml'
+    ident = IdentifierNode(context=context, parameter_overrides=params(
+        out_map=str(out), quiet_period_s=5.0, progress_period_s=0.0, joints=['joint_3'],
+        fill_nominal=True))
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bags=[str(b) for b in bags], rate=0.0, wait_for_subscribers=1, reliable=True,
+        start_delay_s=0.0))
+    executor.add_node(ident)
+    executor.add_node(player)
+    thread = threading.Thread(target=player.run, daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: ident.outcome is not None, 120.0)
+    thread.join(timeout=10)
+    assert ident.outcome.ok, ident.outcome.error
+    stream = ident.outcome.report['stream']
+    assert stream['complete'] and stream['received'] == sum(player.counts.values())
+    got = load_friction_map(out).joints[0]
+    for key in ('coulomb', 'viscous'):
+        assert abs(getattr(got, key) - getattr(offline, key)) <= offline.ci95[key], key
+    for node in (ident, player):
+        executor.remove_node(node)
+        node.destroy_node()
