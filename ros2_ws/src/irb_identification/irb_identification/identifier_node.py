@@ -63,6 +63,7 @@ class IdentifierNode(Node):
             'queue_depth': declare(self, 'queue_depth', 10000, 'subscription queue depth'),
             'fill_nominal': declare(self, 'fill_nominal', False, "failed model joints from "
                                     "irb_description's nominal map (said so in the source)"),
+            'plots_dir': declare(self, 'plots_dir', '', "one figure per joint there, '' = none"),
         }
         self.p = p
         name_map = {}
@@ -78,7 +79,7 @@ class IdentifierNode(Node):
             quiet_period_s=float(p['quiet_period_s']), allow_partial=bool(p['allow_partial']),
             torque_kind=p['torque_kind'], joints=[j for j in p['joints'] if j],
             name_map=name_map, out_map=p['out_map'], out_report=p['out_report'],
-            fill_nominal=bool(p['fill_nominal']),
+            fill_nominal=bool(p['fill_nominal']), plots_dir=p['plots_dir'],
             pipeline=PipelineConfig(
                 method=p['method'],
                 fit=FitConfig(min_speeds=int(p['min_speeds']),

@@ -39,7 +39,8 @@ class StreamConfig:
     signal or a service call); allow_partial: write a map from an incomplete stream (marked
     partial); torque_kind: friction or total; joints, name_map: as identify --joints,
     --map-joint; out_map, out_report: where to write; fill_nominal: failed model joints
-    from the nominal map (as identify --fill-nominal)."""
+    from the nominal map (as identify --fill-nominal); plots_dir: one figure per joint
+    there ('' = none)."""
 
     topic: str = '/joint_states'
     max_messages: int = 2_000_000
@@ -51,6 +52,7 @@ class StreamConfig:
     out_map: str = 'identified_friction_map.yaml'
     out_report: str = ''
     fill_nominal: bool = False
+    plots_dir: str = ''
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
 
 
@@ -200,6 +202,15 @@ class StreamIdentifier:
         tmp = out.with_name(f'.{out.name}.tmp{os.getpid()}')
         fmap.save(tmp)
         os.replace(tmp, out)
+        if cfg.plots_dir:
+            import re
+
+            from .plots import plot_joint
+            Path(cfg.plots_dir).mkdir(parents=True, exist_ok=True)
+            for r in results:
+                safe = re.sub(r'[^A-Za-z0-9_.-]+', '_', r.name)
+                report['joints'][r.name]['plot'] = str(plot_joint(
+                    r, Path(cfg.plots_dir) / f'{out.stem}_{safe}.png'))
         trusted = [r.name for r in results if not r.error and not r.degenerate]
         report.update(ok=bool(trusted), identified=trusted,
                       failed=[r.name for r in results if r.error],
