@@ -241,6 +241,21 @@ def _sample_result(name: str, fit, v: np.ndarray, f: np.ndarray, config: Pipelin
     if op and on and np.all(fb[pos] != 0) and np.all(fb[neg] != 0):
         poly_p = tuple(float(c) for c in fit_polynomial(vb[pos], fb[pos], op))
         poly_n = tuple(float(c) for c in fit_polynomial(vb[neg], fb[neg], on))
+        # a polynomial in v cannot follow a Stribeck dip over a wide log-speed range and
+        # swings between the bins: kept only if it stays within 5 % (+ 0.05 N m) of the
+        # parametric fit over the whole valid range (it replaces it there in the map)
+        lo, hi = fit.valid_range
+        grid = np.geomspace(lo, hi, 400)
+        worst = 0.0
+        for coef, vv in ((poly_p, grid), (poly_n, -grid)):
+            ref = fit.torque(vv)
+            dev = np.abs(np.polynomial.polynomial.polyval(vv, coef) - ref)
+            worst = max(worst, float(np.max(dev / (0.05 * np.abs(ref) + 0.05))))
+        if worst > 1.0:
+            warnings.append(f'{name}: the per-sign polynomials leave the parametric fit by '
+                            f'{worst:.1f} x the 5 % band within the valid range: parametric '
+                            'model only')
+            poly_p = poly_n = None
     else:
         warnings.append(f'{name}: too few speed bins for polynomials: parametric model only')
     s_ok = fit.stribeck_identified

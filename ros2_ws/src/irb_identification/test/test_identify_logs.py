@@ -123,6 +123,13 @@ def test_cli_real_log_path_foreign_names(tmp_path, rng, capsys):
     vv = np.linspace(0.05, 0.8, 50)
     np.testing.assert_allclose(j.parametric(np.r_[vv, -vv]), truth_torque(np.r_[vv, -vv]),
                                atol=0.1)
+    # the map as the controller evaluates it (polynomials inside valid_range, if kept) stays
+    # within 5 % + 0.05 N m of the truth over the whole valid range
+    lo, hi = j.valid_range
+    vv = np.geomspace(lo, hi, 500)
+    vv = np.r_[vv, -vv]
+    assert np.all(np.abs(j.torque(vv) - truth_torque(vv))
+                  <= 0.05 * np.abs(truth_torque(vv)) + 0.05)
     # a name mapping onto the model's joint, and a selection
     out2 = tmp_path / 'map2.yaml'
     assert identify.main(['--bag', str(bag), '--out', str(out2), '--no-plots',
