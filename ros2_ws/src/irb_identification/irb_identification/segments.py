@@ -259,7 +259,7 @@ def speed_points(segments: list[Segment], rel_tol: float = 0.1
         hi = min(max(s.q_range[1] for s in pos), max(s.q_range[1] for s in neg))
         span = min(max(s.q_range[1] for s in ss) - min(s.q_range[0] for s in ss)
                    for ss in (pos, neg))
-        if hi - lo < 0.5 * span:
+        if hi - lo < 0.25 * span:      # partial overlap: the slope correction below copes
             warnings.append(f'speed {c:.4g} rad/s: the +c and -c holds cover different '
                             f'positions (overlap {max(hi - lo, 0.0):.3g} of {span:.3g} rad): '
                             'eq. 4.8 would not cancel gravity, no point')
