@@ -172,7 +172,10 @@ def find_segments(series: JointSeries, joint: int, config: SegmentConfig = Segme
     for a, b in _runs(ok):
         dur = t[b - 1] - t[a]
         cut = config.trim_s + config.trim_fraction * dur
-        sel = np.flatnonzero((t >= t[a] + cut) & (t <= t[b - 1] - cut))
+        # t is sorted: the trimmed hold by bisection (a mask over all of t per run made
+        # long non-sweep logs, with thousands of short runs, quadratic)
+        sel = np.arange(np.searchsorted(t, t[a] + cut, 'left'),
+                        np.searchsorted(t, t[b - 1] - cut, 'right'))
         if len(sel) < 3 or t[sel[-1]] - t[sel[0]] < config.min_duration_s:
             continue
         vs = v[sel]
