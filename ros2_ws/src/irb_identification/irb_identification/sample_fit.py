@@ -311,6 +311,9 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
         elif not ci.get('stribeck_velocity', np.inf) < vs:
             why = (f'Stribeck velocity {vs:.4g} ± {ci.get("stribeck_velocity", np.inf):.3g} '
                    'rad/s: interval wider than the value')
+        elif hump < 0:
+            why = (f'F_s = {x[3]:.4g} below the Coulomb level {0.5 * (x[1] + x[2]):.4g} N m '
+                   '(an inverted dip: the low speeds do not pin the Stribeck term)')
         elif not ci.get('static', np.inf) < abs(hump):
             why = (f'Stribeck hump F_s - F_c = {hump:.4g} N m with F_s ± '
                    f'{ci.get("static", np.inf):.3g} N m: interval wider than the hump')
