@@ -27,6 +27,8 @@ setup(
             'recorder = irb_identification.recorder_node:main',
             'replay = irb_identification.replay_node:main',
             'identify = irb_identification.identify:main',
+            'import_log = irb_identification.import_log:main',
+            'identifier = irb_identification.identifier_node:main',
             'experiments = irb_identification.experiments:main',
             'discrepancy = irb_identification.discrepancy:main',
             'excite = irb_identification.excite:main',

@@ -2,7 +2,8 @@
 
 On the simulator, each phase a node graph of separate processes (irb_control.process_group):
 1. identification sweeps (eq. 4.1) through pdplus in time-driven mode, one bag per run;
-2. `identify` on the recorded bags -> friction map + plots;
+2. the recorded bags replayed (one stream, as fast as the identifier takes them) into the
+   `identifier` node -> friction map + plots (the offline `identify`'s code path);
 3. the thesis circle planned energy-optimally and as the trapezoidal baseline at the same
    duration, both executed by pdplus with the identified compensation, recorded;
 4. the energy-optimal circle again with no compensation;
@@ -18,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import threading
 import time
@@ -215,20 +215,32 @@ def main(args=None) -> int:
             f'({time.monotonic() - t_start:.0f} s so far)')
 
         # 2 ---------------------------------------------------------------------------------
-        log(f'2/{PHASES} identify: friction map from the bags')
-        fmap = out / 'friction_map.yaml'
-        cmd = ['ros2', 'run', 'irb_identification', 'identify', '--out', str(fmap), '--plots',
-               str(out / 'friction'), '--json', str(out / 'identify.json'), '--fill-nominal',
-               '--effort-lag-s', str(float(cfg.get('effort_lag_s', 0.0)))]
-        for b in sweep_bags:
-            cmd += ['--bag', b]
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-        if res.returncode not in (0, 2) or not fmap.exists():
-            raise RuntimeError(f'identify failed: {res.stderr.strip() or res.stdout.strip()}')
-        if res.returncode == 2:
+        log(f'2/{PHASES} identify: replay -> identifier, friction map from the bags')
+        fmap, ident_json = out / 'friction_map.yaml', out / 'identify.json'
+        identifier = ProcessSpec('identifier', ros2_run_cmd(
+            'irb_identification', 'identifier', params={
+                'out_map': str(fmap), 'out_report': str(ident_json), 'fill_nominal': True,
+                'plots_dir': str(out / 'friction'), 'quiet_period_s': 30.0,
+                'effort_lag_s': float(cfg.get('effort_lag_s', 0.0))}))
+        replay = ProcessSpec('replay', ros2_run_cmd('irb_identification', 'replay', params={
+            'bags': str(list(sweep_bags)), 'topics': "['/joint_states']", 'rate': 0.0,
+            'reliable': True, 'wait_for_subscribers': 1, 'wait_timeout_s': 60.0}),
+            required=False)
+        g = graph([identifier, replay])
+        done = g.wait_until(ident_json.exists, cfg['phase_timeout_s'], period_s=0.5)
+        g.stop()
+        ident = json.loads(ident_json.read_text()) if done else {}
+        stream = ident.get('stream', {})
+        if not done or not fmap.exists() or ident.get('error'):
+            raise RuntimeError('identifier failed: '
+                               + (ident.get('error') or g.failed or 'no result in time'))
+        log(f'   identifier received {stream.get("received")} of {stream.get("expected")} '
+            'replayed /joint_states messages')
+        if ident.get('failed') or ident.get('degenerate'):
             log('   some joints not identified, nominal values used for them (see report)')
-        for line in res.stderr.splitlines():      # rejected holds, one-sided speeds, ...
-            log(f'   {line}')
+        for name, entry in ident['joints'].items():   # rejected holds, one-sided speeds, ...
+            for w in entry.get('warnings', []):
+                log(f'   {w}')
         log(f'   map written: {fmap}')
 
         # 3, 4 ------------------------------------------------------------------------------
@@ -381,6 +393,10 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
              'dominates this circle (joint 2), which bounds what any speed profile can save '
              'in this model']
     ident_json = json.loads((out / 'identify.json').read_text())
+    st = ident_json.get('stream', {})
+    notes.append(f'identification ran as replay -> identifier node: {st.get("received")} of '
+                 f'{st.get("expected")} /joint_states messages of {len(sweep_bags)} bags '
+                 f'received, stream complete: {st.get("complete")}')
     for name, entry in ident_json['joints'].items():
         rej = entry.get('rejected_segments', [])
         if rej:

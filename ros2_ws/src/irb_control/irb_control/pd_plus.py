@@ -197,8 +197,9 @@ class ControlOutput:
 
 
 def _parametric_friction(friction: FrictionMap | None) -> list | None:
-    """Per joint (F_c, F_s - F_c, v_s, F_v) when every joint of ``friction`` is purely
-    parametric (JointFriction.parametric), else None (FrictionMap.torque is used)."""
+    """Per joint (F_c+, F_c-, hump+, hump-, v_s, F_v, tau_0) when every joint of ``friction``
+    is purely parametric (JointFriction.parametric), else None (FrictionMap.torque is used).
+    F_c+- = F_c, humps F_s - F_c and tau_0 = 0 for maps without asymmetry and offset."""
     if friction is None or len(friction.joints) != 3:
         return None
     out = []
@@ -206,7 +207,9 @@ def _parametric_friction(friction: FrictionMap | None) -> list | None:
         if (type(j) is not JointFriction or j.polynomial_positive is not None
                 or j.polynomial_negative is not None):
             return None
-        out.append((j.coulomb, j.static - j.coulomb, j.stribeck_velocity, j.viscous))
+        hp, hn = j.humps()
+        out.append((j.coulomb_positive, j.coulomb_negative, hp, hn, j.stribeck_velocity,
+                    j.viscous, j.offset))
     return out
 
 
@@ -549,10 +552,11 @@ class PdPlusController:
         out = []
         exp = np.exp
         for i in range(3):
-            fc, dfs, vs, fv = par[i]
+            fcp, fcn, hp, hn, vs, fv, off = par[i]
             x = v[i]
             # (v / v_s)^2 with pow, as numpy's float64 scalar power does
-            st = dfs * float(exp(-((x / vs) ** 2)))
+            e = float(exp(-((x / vs) ** 2)))
             sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
-            out.append(sg * (fc + st) + fv * x)
+            tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
+            out.append(tf + off if off else tf)
         return out

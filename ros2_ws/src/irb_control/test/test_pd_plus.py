@@ -292,3 +292,22 @@ def test_settle_gate_needs_a_steady_stream_for_the_settle_time():
     assert not gate.feed(t + 0.2) and not gate.feed(t + 0.2 + 3.2 * T)
     assert not gate.feed(t + 0.26)          # the gap before restarted the count
     assert SettleGate(0.0, T).feed(5.0)     # 0: ready on the first sample
+
+
+def test_friction_feedforward_reads_asymmetry_and_offset(model, circle, profile):
+    """pdplus's float path for parametric maps equals irb_description's FrictionMap."""
+    from irb_description.friction import FrictionMap, JointFriction
+    fm = FrictionMap(tuple(model.joint_names), tuple(
+        JointFriction(10.0 + i, 13.0 + i, 0.08, 5.0, (0.01, 2.0), coulomb_positive=11.0 + i,
+                      coulomb_negative=9.0 + i, offset=0.4 - 0.3 * i) for i in range(3)))
+    ctrl = make(model, circle, profile, friction=fm)
+    for qd_ref, qd in (([0.5, -0.3, 0.02], [0.45, -0.31, 0.0]),
+                       ([-1.2, 0.0, 0.3], [-1.1, 0.001, 0.25])):
+        a = ctrl.config.friction_blend_a
+        v = friction_blend(np.array(qd_ref), np.array(qd), a)
+        got = ctrl._friction_torque(qd_ref, tuple(qd))
+        assert_allclose(got, fm.torque(v), rtol=1e-12, atol=1e-12)
+        # and the per-sign levels are really used (not the symmetric mean)
+        assert not np.allclose(got, FrictionMap(fm.joint_names, tuple(
+            JointFriction(j.coulomb, j.static, j.stribeck_velocity, j.viscous)
+            for j in fm.joints)).torque(v))

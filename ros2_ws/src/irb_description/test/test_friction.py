@@ -75,3 +75,84 @@ def test_bad_files_give_clear_errors(tmp_path, model, text, reason):
 def test_missing_file(tmp_path):
     with pytest.raises(FrictionMapError, match='does not exist'):
         load_friction_map(tmp_path / 'nope.yaml')
+
+
+def _asym():
+    return JointFriction(coulomb=10.0, static=14.0, stribeck_velocity=0.1, viscous=2.0,
+                         valid_range=(0.02, 2.0), coulomb_positive=11.0, coulomb_negative=9.0,
+                         offset=-0.5)
+
+
+def test_asymmetric_coulomb_and_offset_formula():
+    j = _asym()
+    hump = 4.0 * np.exp(-1.0)
+    # written out per sign, independently of the implementation's where/sign form
+    assert j.torque(0.1) == pytest.approx(-0.5 + 11.0 + hump + 0.2)
+    assert j.torque(-0.1) == pytest.approx(-0.5 - 9.0 - hump - 0.2)
+    assert j.torque(0.0) == pytest.approx(-0.5)
+    assert j.torque(5.0) == pytest.approx(-0.5 + 11.0 + 10.0)
+
+
+def test_asymmetric_map_round_trip_and_casadi(tmp_path):
+    names = ('a', 'b')
+    fm = FrictionMap(names, (_asym(), JointFriction(3.0, 3.0, 0.05, 1.0)), 'test')
+    path = tmp_path / 'map.yaml'
+    fm.save(path)
+    text = path.read_text()
+    assert 'coulomb_positive' in text and 'offset' in text
+    back = load_friction_map(path)
+    assert back == fm
+    assert 'coulomb_positive' not in str(back.to_dict()['friction_map']['joints']['b'])
+    v = ca.SX.sym('v', 2)
+    f = ca.Function('f', [v], [fm.casadi_torque(v, smoothing=1e-3)])
+    for s in (-1.3, -0.2, 0.05, 0.8):
+        x = np.array([s, -0.5 * s])
+        assert_allclose(np.asarray(f(x)).ravel(), fm.torque(x), atol=1e-6)
+    scaled = fm.scaled(2.0)
+    assert_allclose(scaled.torque(np.array([0.3, -0.3])), 2 * fm.torque(np.array([0.3, -0.3])))
+
+
+def test_old_map_without_new_fields_loads_as_symmetric(tmp_path):
+    path = tmp_path / 'old.yaml'
+    path.write_text('friction_map:\n  version: 1\n  joints:\n    j:\n      coulomb: 5.0\n'
+                    '      static: 6.0\n      stribeck_velocity: 0.05\n      viscous: 1.0\n')
+    j = load_friction_map(path).joints[0]
+    assert j.coulomb_positive == j.coulomb_negative == 5.0 and j.offset == 0.0
+    assert j.symmetric
+    assert j.torque(-0.7) == -j.torque(0.7)
+
+
+def test_per_sign_levels_only_give_their_mean(tmp_path):
+    path = tmp_path / 'sign.yaml'
+    path.write_text('friction_map:\n  joints:\n    j: {coulomb_positive: 4.0, '
+                    'coulomb_negative: 2.0, viscous: 1.0, offset: 0.25}\n')
+    j = load_friction_map(path).joints[0]
+    assert j.coulomb == 3.0 and j.static == 3.0
+    assert j.torque(1.0) == pytest.approx(4.0 + 1.0 + 0.25)
+    assert j.torque(-1.0) == pytest.approx(-2.0 - 1.0 + 0.25)
+
+
+def test_degenerate_joint_is_refused_unless_asked(tmp_path):
+    bad = JointFriction(1.0, 1.0, 0.05, 1.0, degenerate_reason='v_s beyond the data')
+    fm = FrictionMap(('j',), (bad,), 'test')
+    path = tmp_path / 'deg.yaml'
+    fm.save(path)
+    assert 'degenerate: true' in path.read_text()
+    with pytest.raises(FrictionMapError, match='degenerate.*v_s beyond the data'):
+        load_friction_map(path)
+    assert load_friction_map(path, allow_degenerate=True).joints[0].degenerate
+
+
+def test_per_sign_static_levels():
+    """Identified maps: one breakaway level F_s for both signs, Coulomb per sign."""
+    j = JointFriction(coulomb=10.0, static=14.0, stribeck_velocity=0.1, viscous=0.0,
+                      coulomb_positive=11.0, coulomb_negative=9.0, static_positive=14.0,
+                      static_negative=14.0, offset=0.0)
+    assert j.torque(1e-6) == pytest.approx(14.0)
+    assert j.torque(-1e-6) == pytest.approx(-14.0)
+    assert j.torque(0.1) == pytest.approx(11.0 + 3.0 * np.exp(-1))
+    assert j.torque(-0.1) == pytest.approx(-(9.0 + 5.0 * np.exp(-1)))
+    v = ca.SX.sym('v', 1)
+    f = ca.Function('f', [v], [FrictionMap(('j',), (j,)).casadi_torque(v)])
+    for s in (-0.3, -0.05, 0.05, 0.3):
+        assert float(f(s)) == pytest.approx(float(j.torque(s)), abs=1e-6)

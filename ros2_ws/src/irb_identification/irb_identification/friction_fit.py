@@ -89,19 +89,41 @@ class JointResult:
     warnings: list[str] = field(default_factory=list)
     error: str | None = None
     rejected: list[tuple[str, Rejection]] = field(default_factory=list)
+    method: str = 'sweep'                    # 'sweep' (eq. 4.8) or 'samples' (sample_fit)
+    sample: object = None                    # sample_fit.SampleFit of the samples method
+    hold_time_s: float = 0.0                 # time in accepted constant-speed holds [s]
+    degenerate: list[str] = field(default_factory=list)   # honesty-check failures
+    binned: tuple = ()                       # samples method: (speeds, mean torques) per bin
 
 
 def _parametric(v, fc, ds, vs, fv):
     return np.sign(v) * (fc + ds * np.exp(-(v / vs) ** 2)) + fv * v
 
 
-def fit_parametric(v: np.ndarray, tau: np.ndarray) -> ParametricFit:
+def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> ParametricFit:
     """Coulomb + viscous + Stribeck fit to signed speeds v (m,) [rad/s], tau_f (m,) [N m].
 
     Least squares in x = (F_c, F_s - F_c, v_s, F_v) with F_c, F_s - F_c >= 0 and
     v_s in [1e-3, 10] rad/s; multi-start over v_s. Covariance s^2 (J^T J)^-1.
+    ``stribeck`` False: Coulomb + viscous only (linear least squares, F_s = F_c).
     """
     v, tau = np.asarray(v, float), np.asarray(tau, float)
+    if not stribeck:
+        if len(v) < 3:
+            raise IdentificationError(f'{len(v)} points are too few for a 2-parameter fit')
+        X = np.column_stack([np.sign(v), v])
+        sol, *_ = np.linalg.lstsq(X, tau, rcond=None)
+        dof = len(v) - 2
+        rmse = float(np.sqrt(np.sum((tau - X @ sol) ** 2) / max(dof, 1)))
+        cov = np.full((4, 4), np.nan)
+        ci = {}
+        if dof > 0:
+            c2 = np.linalg.inv(X.T @ X) * rmse**2
+            cov[np.ix_([0, 3], [0, 3])] = c2
+            q = stats.t.ppf(0.975, dof)
+            ci = {'coulomb': float(q * np.sqrt(c2[0, 0])), 'viscous': float(q * np.sqrt(c2[1, 1]))}
+        return ParametricFit(float(sol[0]), float(sol[0]), 0.05, float(sol[1]), ci, rmse, dof,
+                             None)
     if len(v) < 5:
         raise IdentificationError(f'{len(v)} points are too few for a 4-parameter fit')
     speed, mag = np.abs(v), np.abs(tau)
@@ -190,8 +212,14 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
     f_neg = np.array([p.f_neg for p in points])
     try:
         par = fit_parametric(np.concatenate([c, -c]), np.concatenate([f_pos, f_neg]))
+        why = stribeck_unsupported(par, float(c.min()), float(c.max()))
+        if why:
+            warnings.append(f'{name}: {why}: Stribeck term dropped (F_s = F_c)')
+            par = fit_parametric(np.concatenate([c, -c]), np.concatenate([f_pos, f_neg]),
+                                 stribeck=False)
     except IdentificationError as exc:      # a joint that cannot be fitted is reported, not fatal
         return JointResult(name, points, warnings=warnings, error=f'{name}: {exc}')
+    degenerate = parametric_problems(par)
     poly_pos = poly_neg = None
     order_pos = choose_order(c, f_pos, config.poly_order)
     order_neg = choose_order(-c, f_neg, config.poly_order)
@@ -214,8 +242,38 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
         viscous=par.viscous, valid_range=(float(c.min()), float(c.max())),
         polynomial_positive=None if poly_pos is None else tuple(float(x) for x in poly_pos),
         polynomial_negative=None if poly_neg is None else tuple(float(x) for x in poly_neg),
-        ci95=par.ci95)
-    return JointResult(name, points, par, poly_pos, poly_neg, jf, warnings)
+        ci95=par.ci95, degenerate_reason='; '.join(degenerate))
+    return JointResult(name, points, par, poly_pos, poly_neg, jf, warnings,
+                       degenerate=degenerate)
+
+
+def stribeck_unsupported(par: ParametricFit, v_lo: float, v_hi: float) -> str | None:
+    """Why the fitted Stribeck term is not supported by data at speeds v_lo..v_hi [rad/s]
+    (None if it is, or if there is no hump at all)."""
+    hump = par.static - par.coulomb
+    if hump <= 0:
+        return None
+    vs = par.stribeck_velocity
+    if not v_lo <= vs <= v_hi:
+        return (f'Stribeck velocity {vs:.4g} rad/s outside the measured speeds '
+                f'{v_lo:.4g}..{v_hi:.4g} rad/s')
+    hw = par.ci95.get('stribeck_velocity', np.inf)
+    if not hw < vs:
+        return f'Stribeck velocity {vs:.4g} ± {hw:.3g} rad/s: interval wider than the value'
+    return None
+
+
+def parametric_problems(par: ParametricFit) -> list[str]:
+    """Honesty checks of a sweep fit: negative levels, intervals wider than the value."""
+    out = []
+    for key in ('coulomb', 'viscous', 'static'):
+        val = getattr(par, key)
+        if val < 0:
+            out.append(f'{key} = {val:.4g} < 0 (friction only dissipates)')
+        elif key in par.ci95 and par.ci95[key] > abs(val):
+            out.append(f'{key} = {val:.4g} ± {par.ci95[key]:.3g}: interval wider than the '
+                       'value')
+    return out
 
 
 def identify_series(series_list: list[JointSeries], joint_names: list[str],
@@ -272,7 +330,8 @@ def identify_series(series_list: list[JointSeries], joint_names: list[str],
             continue
         points, warnings = speed_points(segs[j], config.pair_rel_tol)
         res = identify_points(name, points, config, notes + warnings)
-        results.append(replace(res, rejected=rejected[j]))
+        results.append(replace(res, rejected=rejected[j], hold_time_s=float(sum(
+            s.t_end - s.t_start for s in segs[j]))))
     return results
 
 

@@ -1,21 +1,32 @@
-"""identify: friction maps from constant-speed experiment bags (thesis §4.2, eq. 4.8).
+"""identify: friction maps from bags of any motion (thesis §4.2 sweeps, or any trajectory).
 
-    ros2 run irb_identification identify --bag bags/a --bag bags/b --out friction_map.yaml
+    ros2 run irb_identification identify --bag bags/a [--bag bags/b] --out friction_map.yaml \\
+        [--json report.json] [--method auto|sweep|samples] [--torque-kind auto|friction|total]
+        [--joints a,b] [--map-joint BAG_NAME:MODEL_NAME ...]
 
-Offline (no ROS graph needed). Exit code 0: every joint identified; 2: some joints (map has
-the others, or all with --fill-nominal); 1: nothing identified or no usable bag.
+Offline (no ROS graph needed). Exit code 0: every joint identified with a trusted fit; 2: some
+joints failed or are marked degenerate (the map says which, with the reason); 1: nothing
+identified, no usable bag, or bad names. ``--json`` is written in every case.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
+import yaml
+
 from .bagio import BagError
-from .friction_fit import FitConfig, IdentificationError, friction_map, identify_series
+from .friction_fit import FitConfig, IdentificationError, friction_map
+from .pipeline import METHODS, PipelineConfig, identify_joints, report_entry, summary_line
+from .sample_fit import SampleFitConfig
 from .segments import SegmentConfig
 from .series import JointStateError, read_joint_series
+
+TORQUE_KIND_KEY = 'irb_identification.torque_kind'
+ACCEL_TOPIC = '/joint_accelerations'
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -26,19 +37,51 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--plots', default=None,
                    help='directory for <joint>.png figures (default: next to --out)')
     p.add_argument('--no-plots', action='store_true')
+    p.add_argument('--method', default='auto', choices=METHODS,
+                   help='sweep = eq. 4.8 on constant-speed holds; samples = fit on every '
+                   'sample; auto = sweep when the data are sweeps')
+    p.add_argument('--torque-kind', default='auto', choices=('auto', 'friction', 'total'),
+                   help='effort is the friction torque or the total joint torque; auto = the '
+                   "bag's custom_data (import_log writes it), else total")
+    p.add_argument('--joints', default='', help='comma-separated joints to identify '
+                   '(names after --map-joint; default all)')
+    p.add_argument('--map-joint', action='append', default=[], metavar='BAG_NAME:NAME',
+                   help="rename a bag joint (e.g. onto the model's joint_2, for total torque "
+                   'and for maps the controller loads); repeatable')
+    p.add_argument('--v-min', type=float, default=0.01,
+                   help='[rad/s] samples slower are not used by the samples method')
     p.add_argument('--poly-order', type=int, default=7, choices=(0, 5, 6, 7),
                    help='polynomial order per sign, 0 = pick 5-7 by leave-one-out')
-    p.add_argument('--min-speeds', type=int, default=4, help='fewest speeds per joint')
+    p.add_argument('--min-speeds', type=int, default=4, help='fewest speeds per joint (sweep)')
     p.add_argument('--model-compensation', action='store_true',
-                   help='per-sign points = torque - model M qdd + C qd + g (keeps asymmetry)')
+                   help='sweep: per-sign points = torque - model M qdd + C qd + g')
     p.add_argument('--fill-nominal', action='store_true',
                    help='write joints that fail with the nominal friction of irb_description')
     p.add_argument('--effort-lag-s', type=float, default=0.0,
-                   help='[s] the effort of a sample is the torque that acted this long before '
-                   'it (e.g. 0.002016 = half a period for the mean torque of the period '
-                   'before the sample); corrects eq. 4.8 where gravity varies with position')
-    p.add_argument('--json', default=None, help='also write a JSON report here')
+                   help='[s] sweep: the effort of a sample is the torque that acted this long '
+                   'before it (see README)')
+    p.add_argument('--json', default=None, help='also write a JSON report here (always)')
     return p
+
+
+def bag_torque_kind(bag: str) -> str | None:
+    """The torque kind import_log stored in the bag's metadata, or None."""
+    try:
+        info = yaml.safe_load((Path(bag) / 'metadata.yaml').read_text())
+        return (info['rosbag2_bagfile_information'].get('custom_data') or {}).get(
+            TORQUE_KIND_KEY)
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def _read_accel(bag: str):
+    from .bagio import bag_topics
+    from .series import decode_joint_states
+    if ACCEL_TOPIC not in bag_topics(bag):
+        return None
+    from .bagio import read_messages
+    msgs = read_messages(bag, [ACCEL_TOPIC])[ACCEL_TOPIC]
+    return decode_joint_states(msgs.data, msgs.t_ns) if msgs.data else None
 
 
 def main(args=None) -> int:
@@ -46,62 +89,95 @@ def main(args=None) -> int:
     if '--ros-args' in argv:
         argv = argv[:argv.index('--ros-args')]
     opts = _parser().parse_args(argv)
+    report = {'out': opts.out, 'bags': opts.bag, 'problems': [], 'joints': {},
+              'effort_lag_s': opts.effort_lag_s, 'method_requested': opts.method,
+              'ok': False}
+
+    def finish(code: int, message: str | None = None) -> int:
+        if message:
+            print(f'identify: {message}', file=sys.stderr)
+            report['error'] = message
+        report['exit_code'] = code
+        if opts.json:
+            Path(opts.json).parent.mkdir(parents=True, exist_ok=True)
+            Path(opts.json).write_text(json.dumps(report, indent=2, default=float))
+        return code
+
+    name_map = {}
+    for spec in opts.map_joint:
+        a, sep, b = spec.partition(':')
+        if not sep or not a or not b:
+            return finish(1, f'--map-joint {spec!r}: expected BAG_NAME:NAME')
+        name_map[a] = b
     from irb_description.model import RobotModel
     model = RobotModel.load()
-    series, labels, problems = [], [], []
+    series, labels, kinds, accels = [], [], [], []
     for bag in opts.bag:
         try:
-            series.append(read_joint_series(bag, opts.topic))
-            labels.append(Path(bag).name)
+            s = read_joint_series(bag, opts.topic)
+            accel = _read_accel(bag)
         except (BagError, JointStateError) as exc:
-            problems.append(str(exc))
+            report['problems'].append(str(exc))
             print(f'identify: skipping: {exc}', file=sys.stderr)
+            continue
+        series.append(s)
+        labels.append(Path(bag).name)
+        kinds.append(opts.torque_kind if opts.torque_kind != 'auto'
+                     else bag_torque_kind(bag) or 'total')
+        accels.append(accel)
+    report['torque_kinds'] = dict(zip(labels, kinds))
     if not series:
-        print('identify: no usable bag', file=sys.stderr)
-        return 1
-    config = FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds,
-                       segments=SegmentConfig(effort_lag_s=opts.effort_lag_s))
-    results = identify_series(series, model.joint_names, config,
-                              model=model if opts.model_compensation else None, labels=labels)
-    source = 'identified from ' + ', '.join(Path(b).name for b in opts.bag)
+        return finish(1, 'no usable bag: ' + '; '.join(report['problems']))
+    config = PipelineConfig(
+        method=opts.method,
+        fit=FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds,
+                      segments=SegmentConfig(effort_lag_s=opts.effort_lag_s)),
+        samples=SampleFitConfig(v_min=opts.v_min))
+    joints = [j.strip() for j in opts.joints.split(',') if j.strip()]
     try:
-        fmap = friction_map(results, source, model.friction if opts.fill_nominal else None)
+        results = identify_joints(series, labels, kinds, joints or None, name_map, model,
+                                  config, accels, opts.model_compensation,
+                                  progress=lambda m: print(f'identify: {m}', flush=True))
     except IdentificationError as exc:
-        print(f'identify: {exc}', file=sys.stderr)
-        return 1
+        return finish(1, str(exc))
+    for r in results:
+        report['joints'][r.name] = report_entry(r)
+        print(f'identify: {summary_line(r)}')
+        for w in r.warnings:
+            print(f'identify: note: {w}', file=sys.stderr)
+    source = 'identified from ' + ', '.join(labels)
+    fill = None
+    if opts.fill_nominal:
+        fill = model.friction
+        if any(r.name not in fill.joint_names for r in results if r.friction is None):
+            fill = None
+            report['problems'].append('--fill-nominal: only for the model joint names')
+    try:
+        fmap = friction_map(results, source, fill)
+    except IdentificationError as exc:
+        return finish(1, str(exc))
     out = Path(opts.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fmap.save(out)
-    report = {'out': str(out), 'bags': opts.bag, 'problems': problems,
-              'effort_lag_s': opts.effort_lag_s, 'joints': {}}
     plot_dir = None if opts.no_plots else Path(opts.plots) if opts.plots else out.parent
-    for r in results:
-        entry = {'speeds': len(r.points), 'error': r.error, 'warnings': r.warnings,
-                 'rejected_segments': [{'bag': label, 'speed_rad_s': x.speed,
-                                        't_start_s': x.t_start, 't_end_s': x.t_end,
-                                        'reason': x.reason} for label, x in r.rejected]}
-        if r.parametric is not None:
-            pf = r.parametric
-            entry.update(coulomb=pf.coulomb, static=pf.static,
-                         stribeck_velocity=pf.stribeck_velocity, viscous=pf.viscous,
-                         ci95=pf.ci95, rmse=pf.rmse, valid_range=list(r.friction.valid_range))
-        if plot_dir is not None:
-            from .plots import plot_joint
-            plot_dir.mkdir(parents=True, exist_ok=True)
-            entry['plot'] = str(plot_joint(r, plot_dir / f'{out.stem}_{r.name}.png'))
-        report['joints'][r.name] = entry
-        status = r.error or (f'F_c {pf.coulomb:.3f} N m, F_v {pf.viscous:.3f} N m s/rad, '
-                             f'{len(r.points)} speeds')
-        if r.rejected:
-            status += f' ({len(r.rejected)} hold(s) rejected: stick-slip signature)'
-        print(f'identify: {r.name}: {status}')
-        for w in r.warnings:
-            print(f'identify: warning: {w}', file=sys.stderr)
-    if opts.json:
-        Path(opts.json).write_text(json.dumps(report, indent=2))
-    print(f'identify: wrote {out}')
+    if plot_dir is not None:
+        from .plots import plot_joint
+        plot_dir.mkdir(parents=True, exist_ok=True)
+        for r in results:
+            safe = re.sub(r'[^A-Za-z0-9_.-]+', '_', r.name)
+            report['joints'][r.name]['plot'] = str(
+                plot_joint(r, plot_dir / f'{out.stem}_{safe}.png'))
     failed = [r.name for r in results if r.error]
-    return 2 if failed else 0
+    degenerate = [r.name for r in results if r.degenerate]
+    trusted = [r.name for r in results if not r.error and not r.degenerate]
+    report.update(ok=not failed and not degenerate, failed=failed, degenerate=degenerate,
+                  identified=trusted)
+    print(f'identify: wrote {out}' + (f' (degenerate, not for use: {", ".join(degenerate)})'
+                                      if degenerate else ''))
+    if not trusted:
+        return finish(1, 'no joint has a trusted fit: ' + '; '.join(
+            (r.error or '; '.join(r.degenerate)) for r in results))
+    return finish(2 if failed or degenerate else 0)
 
 
 if __name__ == '__main__':

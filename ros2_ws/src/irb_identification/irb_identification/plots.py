@@ -26,6 +26,17 @@ def plot_joint(result: JointResult, path: str | Path, truth=None) -> Path:
         ax.plot(np.r_[c, -c], np.r_[[p.tau_f for p in result.points],
                                     [-p.tau_f for p in result.points]],
                 'x', color='tab:red', label=r'eq. 4.8 $(\tau_+ - \tau_-)/2$')
+    if result.binned and result.friction is not None:
+        vb, fb = result.binned
+        ax.plot(vb, fb, 'o', ms=3, color='k', label='measured, mean per speed bin')
+        lo, hi = result.friction.valid_range
+        v = np.r_[-np.geomspace(hi, lo, 200), np.nan, np.geomspace(lo, hi, 200)]
+        j = result.friction
+        ax.plot(v, j.parametric(v), color='tab:blue', label=(
+            f'fit: $F_{{c+}}$={j.coulomb_positive:.3g}, $F_{{c-}}$={j.coulomb_negative:.3g}, '
+            f'$F_s$={j.static:.3g}, offset {j.offset:.3g} N m, $F_v$={j.viscous:.3g} N m s/rad'))
+        if truth is not None:
+            ax.plot(v, truth.torque(v), ':', color='gray', label='truth')
     if result.parametric is not None:
         lo, hi = result.friction.valid_range
         v = np.r_[-np.linspace(hi, lo, 200), np.nan, np.linspace(lo, hi, 200)]

@@ -172,7 +172,10 @@ def find_segments(series: JointSeries, joint: int, config: SegmentConfig = Segme
     for a, b in _runs(ok):
         dur = t[b - 1] - t[a]
         cut = config.trim_s + config.trim_fraction * dur
-        sel = np.flatnonzero((t >= t[a] + cut) & (t <= t[b - 1] - cut))
+        # t is sorted: the trimmed hold by bisection (a mask over all of t per run made
+        # long non-sweep logs, with thousands of short runs, quadratic)
+        sel = np.arange(np.searchsorted(t, t[a] + cut, 'left'),
+                        np.searchsorted(t, t[b - 1] - cut, 'right'))
         if len(sel) < 3 or t[sel[-1]] - t[sel[0]] < config.min_duration_s:
             continue
         vs = v[sel]
@@ -254,6 +257,15 @@ def speed_points(segments: list[Segment], rel_tol: float = 0.1
         if not pos or not neg:
             warnings.append(f'speed {c:.4g} rad/s seen only with sign '
                             f'{"+" if pos else "-"}: no eq. 4.8 point')
+            continue
+        lo = max(min(s.q_range[0] for s in pos), min(s.q_range[0] for s in neg))
+        hi = min(max(s.q_range[1] for s in pos), max(s.q_range[1] for s in neg))
+        span = min(max(s.q_range[1] for s in ss) - min(s.q_range[0] for s in ss)
+                   for ss in (pos, neg))
+        if hi - lo < 0.25 * span:      # partial overlap: the slope correction below copes
+            warnings.append(f'speed {c:.4g} rad/s: the +c and -c holds cover different '
+                            f'positions (overlap {max(hi - lo, 0.0):.3g} of {span:.3g} rad): '
+                            'eq. 4.8 would not cancel gravity, no point')
             continue
 
         def wmean(ss, attr):

@@ -1,0 +1,179 @@
+"""identifier: friction maps from a replayed (or live) /joint_states stream.
+
+    ros2 run irb_identification identifier --ros-args -p out_map:=runs/map.yaml
+    ros2 run irb_identification replay --ros-args -p bag:=bags/run1 -p wait_for_subscribers:=1 \\
+        -p reliable:=true
+
+A thin adapter around stream.StreamIdentifier (the same identification code path as the
+offline `identify`): raw subscription to ``topic`` with the QoS of the publishers it finds
+(best effort if any is: the simulator; reliable otherwise: `replay` with ``reliable``),
+`replay`'s latched status, services ``~/compute`` and ``~/reset`` (std_srvs/Trigger); the map
+path on the latched ``~/friction_map`` (std_msgs/String) when a map was written.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+from irb_description.node_main import declare, latched_qos, run_node, spin_until_signal
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from .friction_fit import FitConfig
+from .pipeline import PipelineConfig
+from .rosutil import subscription_qos
+from .sample_fit import SampleFitConfig
+from .segments import SegmentConfig
+from .stream import StreamConfig, StreamIdentifier
+
+
+class IdentifierNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('identifier', **kwargs)
+        p = {
+            'topic': declare(self, 'topic', '/joint_states',
+                             'JointState topic (effort = torque)'),
+            'status_topic': declare(self, 'status_topic', '/replay/status',
+                                    "replay's latched end-of-stream status (std_msgs/String)"),
+            'out_map': declare(self, 'out_map', 'identified_friction_map.yaml',
+                               'friction-map YAML to write'),
+            'out_report': declare(self, 'out_report', '',
+                                  "JSON report, '' = next to out_map (.json)"),
+            'torque_kind': declare(self, 'torque_kind', 'total',
+                                   'total (effort = joint torque) or friction'),
+            'method': declare(self, 'method', 'auto', 'auto | sweep | samples'),
+            'joints': declare(self, 'joints', [''], "joints to identify ('' = all)"),
+            'map_joint': declare(self, 'map_joint', [''],
+                                 "renames 'BAG_NAME:NAME' as identify --map-joint"),
+            'effort_lag_s': declare(self, 'effort_lag_s', 0.0,
+                                    '[s] the effort acted this long before its stamp'),
+            'min_speeds': declare(self, 'min_speeds', 4, 'fewest speeds per joint (sweep)'),
+            'v_min': declare(self, 'v_min', 0.01, '[rad/s] slowest sample used (samples)'),
+            'quiet_period_s': declare(self, 'quiet_period_s', 2.0,
+                                      '[s] no message this long ends a stream, 0 = never'),
+            'max_messages': declare(self, 'max_messages', 2_000_000,
+                                    'messages kept at most (memory bound)'),
+            'allow_partial': declare(self, 'allow_partial', False,
+                                     'write a map (marked partial) from an incomplete stream'),
+            'progress_period_s': declare(self, 'progress_period_s', 5.0,
+                                         '[s] progress log period, 0 = off'),
+            'queue_depth': declare(self, 'queue_depth', 10000, 'subscription queue depth'),
+            'fill_nominal': declare(self, 'fill_nominal', False, "failed model joints from "
+                                    "irb_description's nominal map (said so in the source)"),
+            'plots_dir': declare(self, 'plots_dir', '', "one figure per joint there, '' = none"),
+        }
+        self.p = p
+        name_map = {}
+        for spec in p['map_joint']:
+            if spec:
+                a, sep, b = spec.partition(':')
+                if not sep or not a or not b:
+                    raise ValueError(f'map_joint {spec!r}: expected BAG_NAME:NAME')
+                name_map[a] = b
+        from irb_description.model import RobotModel
+        config = StreamConfig(
+            topic=p['topic'], max_messages=int(p['max_messages']),
+            quiet_period_s=float(p['quiet_period_s']), allow_partial=bool(p['allow_partial']),
+            torque_kind=p['torque_kind'], joints=[j for j in p['joints'] if j],
+            name_map=name_map, out_map=p['out_map'], out_report=p['out_report'],
+            fill_nominal=bool(p['fill_nominal']), plots_dir=p['plots_dir'],
+            pipeline=PipelineConfig(
+                method=p['method'],
+                fit=FitConfig(min_speeds=int(p['min_speeds']),
+                              segments=SegmentConfig(effort_lag_s=float(p['effort_lag_s']))),
+                samples=SampleFitConfig(v_min=float(p['v_min']))))
+        self.core = StreamIdentifier(config, RobotModel.load())
+        self.map_pub = self.create_publisher(String, '~/friction_map', latched_qos())
+        self.create_subscription(String, p['status_topic'], self._on_status, latched_qos())
+        self.create_service(Trigger, '~/compute', self._srv_compute)
+        self.create_service(Trigger, '~/reset', self._srv_reset)
+        self.sub = None
+        self.outcome = None
+        self.create_timer(0.1, self._tick)
+        if p['progress_period_s'] > 0:
+            self.create_timer(float(p['progress_period_s']), self._progress)
+        self.get_logger().info(f'waiting for publishers of {p["topic"]}')
+
+    def _subscribe_when_published(self) -> None:
+        pubs = self.get_publishers_info_by_topic(self.p['topic'])
+        if not pubs:
+            return
+        qos = subscription_qos(pubs, int(self.p['queue_depth']))
+        if qos.reliability == ReliabilityPolicy.RELIABLE:
+            # keep all: a full queue is not acknowledged, so a reliable publisher (replay)
+            # waits for this node instead of losing what it cannot take yet
+            qos.history = HistoryPolicy.KEEP_ALL
+        self.sub = self.create_subscription(
+            _joint_state_class(), self.p['topic'], self._on_msg, qos, raw=True)
+        self.get_logger().info(f'subscribed to {self.p["topic"]} '
+                               f'({qos.reliability.name.lower()}, '
+                               f'{qos.history.name.lower()}, depth {qos.depth})')
+
+    def _on_msg(self, data: bytes) -> None:
+        self.core.add(data, time.time_ns(), time.monotonic())
+
+    def _on_status(self, msg: String) -> None:
+        self.core.on_status(msg.data)
+
+    def _tick(self) -> None:
+        if self.sub is None:
+            self._subscribe_when_published()
+        why = self.core.due(time.monotonic())
+        if why:
+            self._compute(why)
+
+    def _progress(self) -> None:
+        if self.core.received and not self.core.computed:
+            self.get_logger().info(self.core.progress())
+
+    def _compute(self, trigger: str):
+        log = self.get_logger()
+        log.info(f'stream ended ({trigger}): {self.core.progress()}; identifying')
+        out = self.core.compute(trigger, progress=lambda m: log.info(m))
+        for line in out.lines:
+            log.info(line)
+        if out.error:
+            log.error(out.error)
+        if out.map_path:
+            self.map_pub.publish(String(data=out.map_path))
+            log.info(f'wrote {out.map_path}')
+        self.outcome = out
+        return out
+
+    def _srv_compute(self, request, response):
+        out = self._compute('service')
+        response.success = bool(out.ok)
+        response.message = out.map_path if out.ok else out.error
+        return response
+
+    def _srv_reset(self, request, response):
+        self.core.reset()
+        self.outcome = None
+        response.success = True
+        response.message = 'reset'
+        return response
+
+
+def _joint_state_class():
+    from sensor_msgs.msg import JointState
+    return JointState
+
+
+def main(args=None):
+    def spin(node):
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        spin_until_signal(executor)
+    try:
+        run_node(IdentifierNode, spin, args)
+    except ValueError as exc:
+        print(f'identifier: {exc}', file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,328 @@
+"""Identification from joint-state series: one code path for `identify` and the node. No rclpy.
+
+``identify_joints`` takes JointSeries (one per bag or stream), the torque kind of each
+(``friction``: the effort is the friction torque; ``total``: the joint torque, from which the
+rigid-body model's M q_dd + C q_d + g is subtracted), optional measured accelerations, a
+joint selection and a name mapping (bag name -> model/map name), and per joint chooses:
+
+* ``sweep``: the thesis's eq. 4.8 points from constant-speed holds (segments.py,
+  friction_fit.identify_series), when the data are sweeps: at least ``min_speeds`` +c/-c
+  pairs and the holds cover at least ``sweep_hold_fraction`` of the time the joint moves;
+* ``samples``: the trajectory-agnostic fit on every sample (sample_fit.fit_samples).
+
+``method`` forces one. The result per joint is a friction_fit.JointResult with ``method``,
+``warnings``, ``error`` and ``degenerate`` (honesty-check failures); ``report_entry`` turns
+it into the JSON report's entry.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from irb_description.friction import JointFriction
+
+from .friction_fit import (FitConfig, IdentificationError, JointResult, choose_order,
+                           fit_polynomial, identify_series)
+from .sample_fit import SampleFitConfig, SampleFitError, binned_means, fit_samples
+from .series import JointSeries
+
+METHODS = ('auto', 'sweep', 'samples')
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """method: auto | sweep | samples; sweep_hold_fraction [-]: share of the moving time in
+    accepted holds above which data count as sweeps; accel_window_s [s]: Savitzky-Golay
+    window for q_dd where no acceleration was measured (total torque only);
+    accel_check_window_s [s], accel_tolerance [rad/s^2]: where q_dd over the short window
+    differs from q_dd over the long one by more than accel_tolerance + 10 %, the acceleration
+    is not resolved (a step in q_dd: ramps, impacts) and M q_dd cannot be subtracted there:
+    those samples are left out of a total-torque fit (counted in the notes)."""
+
+    method: str = 'auto'
+    fit: FitConfig = field(default_factory=FitConfig)
+    samples: SampleFitConfig = field(default_factory=SampleFitConfig)
+    sweep_hold_fraction: float = 0.3
+    accel_window_s: float = 0.05
+    accel_check_window_s: float = 0.02
+    accel_tolerance: float = 0.5
+
+
+def rename(series: JointSeries, name_map: dict[str, str]) -> JointSeries:
+    """The series with joints renamed by ``name_map`` (bag name -> new name)."""
+    return JointSeries(series.t, tuple(name_map.get(n, n) for n in series.names),
+                       series.position, series.velocity, series.effort)
+
+
+def acceleration(t: np.ndarray, v: np.ndarray, window_s: float) -> np.ndarray:
+    """q_dd (N, n) [rad/s^2] from speeds v (N, n) at irregular times t (N,): v resampled to
+    the median step, Savitzky-Golay derivative (order 2, ``window_s``), interpolated back."""
+    from scipy.signal import savgol_filter
+    if len(t) < 5:
+        return np.zeros_like(v)
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if not len(steps):
+        return np.zeros_like(v)
+    dt = float(np.median(steps))
+    grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+    win = max(5, int(round(window_s / dt)) | 1)
+    out = np.empty_like(v)
+    for k in range(v.shape[1]):
+        vg = np.interp(grid, t, v[:, k])
+        if len(vg) <= win:
+            out[:, k] = np.gradient(v[:, k], t)
+            continue
+        ag = savgol_filter(vg, win, 2, deriv=1, delta=dt)
+        out[:, k] = np.interp(t, grid, ag)
+    return out
+
+
+def rigid_body_torque(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                      rows: np.ndarray) -> np.ndarray:
+    """M q_dd + C q_d + g (N, n) [N m] of the model at ``rows`` (others nan)."""
+    out = np.full(q.shape, np.nan)
+    for i in np.flatnonzero(rows):
+        out[i] = model.inverse_dynamics(q[i], qd[i], qdd[i])
+    return out
+
+
+def identify_joints(series_list: list[JointSeries], labels: list[str], torque_kinds: list[str],
+                    joints: list[str] | None = None, name_map: dict[str, str] | None = None,
+                    model=None, config: PipelineConfig = PipelineConfig(),
+                    accelerations: list[JointSeries | None] | None = None,
+                    model_compensation: bool = False, progress=None) -> list[JointResult]:
+    """Identify ``joints`` (names after ``name_map``; None = every joint of the series).
+
+    Raises IdentificationError (one line) when names do not fit: the selection names a joint
+    the data lack, the series disagree on their joints, or a ``total`` torque needs the
+    rigid-body model for joints it does not know.
+    """
+    if config.method not in METHODS:
+        raise IdentificationError(f'method {config.method!r}: one of {", ".join(METHODS)}')
+    name_map = dict(name_map or {})
+    series_list = [rename(s, name_map) for s in series_list]
+    accelerations = [None if a is None else rename(a, name_map)
+                     for a in (accelerations or [None] * len(series_list))]
+    names = series_list[0].names
+    for s, label in zip(series_list[1:], labels[1:]):
+        if set(s.names) != set(names):
+            raise IdentificationError(f'{label} has joints {list(s.names)}, {labels[0]} has '
+                                      f'{list(names)}: identify them separately')
+    joints = list(joints) if joints else list(names)
+    missing = [j for j in joints if j not in names]
+    if missing:
+        shown = ', '.join(f'{b} -> {m}' for b, m in name_map.items()) or 'none'
+        raise IdentificationError(f'{labels[0]}: no joint {", ".join(missing)}; joints found: '
+                                  f'{", ".join(names)} (name mapping: {shown})')
+    total = 'total' in torque_kinds
+    if total:
+        known = list(model.joint_names) if model is not None else []
+        lacking = [n for n in known if n not in names]
+        foreign = [j for j in joints if j not in known]
+        if model is None or lacking or foreign:
+            raise IdentificationError(
+                f'{labels[torque_kinds.index("total")]}: the torque is total, so the '
+                f'rigid-body model is subtracted, and it knows only {", ".join(known)} (all '
+                f'needed); the data have {", ".join(names)}. Map the names with --map-joint '
+                'BAG_NAME:MODEL_NAME, or, for another robot, import the friction torque '
+                '(--torque-kind friction)')
+    # sweep candidates: eq. 4.8 on the holds (cheap; needs no model unless compensating)
+    sweep = {}
+    if config.method in ('auto', 'sweep'):
+        kinds_ok = [s for s in series_list]
+        res = identify_series(kinds_ok, joints, config.fit,
+                              model=model if (model_compensation and total) else None,
+                              labels=labels)
+        sweep = {r.name: r for r in res}
+    results = []
+    tau_f_cache = {}
+    for j in joints:
+        moving = sum(_moving_time(s, j, config.samples.v_min) for s in series_list)
+        sw = sweep.get(j)
+        # sweeps: the holds are most of the motion (then eq. 4.8's answer, or its error,
+        # e.g. too few speeds, stands: a fit on the ramps between holds is no better)
+        is_sweep = (sw is not None and sw.hold_time_s > 0
+                    and sw.hold_time_s >= config.sweep_hold_fraction * moving)
+        if config.method == 'sweep' or (config.method == 'auto' and is_sweep):
+            note = (f'{j}: method sweep (eq. 4.8): {len(sw.points)} speeds, holds '
+                    f'{sw.hold_time_s:.1f} s of {moving:.1f} s moving')
+            if sw.error and config.method == 'auto':
+                note += ' (use --method samples to fit every sample instead)'
+            results.append(replace(sw, method='sweep', warnings=[note] + list(sw.warnings)))
+            continue
+        why = ('forced by --method samples' if config.method == 'samples' else
+               f'not sweeps (holds {sw.hold_time_s if sw else 0:.1f} s of {moving:.1f} s '
+               'moving)')
+        if progress:
+            progress(f'{j}: method samples ({why})')
+        if not tau_f_cache and total:
+            tau_f_cache.update(_friction_torques(series_list, accelerations, model, config,
+                                                 progress))
+        t_all, v_all, f_all = [], [], []
+        offset = 0.0
+        for k, s in enumerate(series_list):
+            col = s.names.index(j)
+            tf = tau_f_cache[k][:, col] if total else s.effort[:, col]
+            t_all.append(s.t - s.t[0] + offset)
+            offset = t_all[-1][-1] + 10.0          # bags never share a time block
+            v_all.append(tau_f_cache[('v', k)][:, col] if total else s.velocity[:, col])
+            f_all.append(tf)
+        t, v, f = (np.concatenate(a) for a in (t_all, v_all, f_all))
+        if total and tau_f_cache.get('unresolved'):
+            why += (f'; {tau_f_cache["unresolved"]} samples left out where q_dd is not '
+                    'resolved (steps in acceleration)')
+        try:
+            fit = fit_samples(t, v, f, j, config.samples, progress)
+        except SampleFitError as exc:
+            results.append(JointResult(j, [], method='samples', error=str(exc),
+                                       warnings=[f'{j}: method samples ({why})']))
+            continue
+        results.append(_sample_result(j, fit, v, f, config, why))
+    return results
+
+
+def _moving_time(s: JointSeries, joint: str, v_min: float) -> float:
+    col = s.names.index(joint)
+    if len(s.t) < 2:
+        return 0.0
+    dt = np.diff(s.t, append=s.t[-1])
+    dt = np.minimum(dt, 5 * float(np.median(np.diff(s.t))))
+    return float(np.sum(dt[np.abs(s.velocity[:, col]) >= v_min]))
+
+
+def _friction_torques(series_list, accelerations, model, config, progress) -> dict:
+    """effort - (M q_dd + C q_d + g) (N, n) per series, in the series' joint order."""
+    out = {}
+    idx_model = None
+    for k, (s, acc) in enumerate(zip(series_list, accelerations)):
+        idx_model = [s.names.index(n) for n in model.joint_names]
+        q, qd = s.position[:, idx_model], s.velocity[:, idx_model]
+        if acc is not None:
+            a = acc.select(list(s.names))
+            qdd = np.column_stack([np.interp(s.t, a.t, a.position[:, c])
+                                   for c in range(len(s.names))])[:, idx_model]
+            if not np.all(np.isfinite(qdd)):
+                qdd = acceleration(s.t, qd, config.accel_window_s)
+        else:
+            qdd = acceleration(s.t, qd, config.accel_window_s)
+        rows = np.any(np.abs(qd) >= config.samples.v_min, axis=1)
+        if acc is None:
+            short = acceleration(s.t, qd, config.accel_check_window_s)
+            steady = np.all(np.abs(short - qdd) <= config.accel_tolerance
+                            + 0.1 * np.abs(qdd), axis=1)
+        else:
+            steady = np.ones(len(s.t), bool)
+        if progress:
+            progress(f'rigid-body torque on {int(rows.sum())} samples')
+        lag = config.fit.segments.effort_lag_s       # torque acted at t - lag: at q - qd lag
+        rb = rigid_body_torque(model, q - lag * qd if lag else q, qd, qdd, rows)
+        tf = np.full(s.effort.shape, np.nan)
+        tf[:, idx_model] = s.effort[:, idx_model] - rb
+        tf[~steady] = np.nan
+        out[k] = tf
+        # the speed the torque acted at: v(t - lag) = v - lag q_dd
+        out[('v', k)] = s.velocity.copy()
+        if lag:
+            out[('v', k)][:, idx_model] -= lag * qdd
+        out['unresolved'] = out.get('unresolved', 0) + int(np.count_nonzero(rows & ~steady))
+    return out
+
+
+def _sample_result(name: str, fit, v: np.ndarray, f: np.ndarray, config: PipelineConfig,
+                   why: str) -> JointResult:
+    warnings = [f'{name}: method samples ({why}): {fit.samples} samples, {fit.blocks} '
+                'time blocks for the intervals'] + [f'{name}: {n}' for n in fit.notes]
+    vb, fb = binned_means(v, f, config.samples.v_min)
+    pos, neg = vb > 0, vb < 0
+    poly_p = poly_n = None
+    op = choose_order(vb[pos], fb[pos], config.fit.poly_order)
+    on = choose_order(vb[neg], fb[neg], config.fit.poly_order)
+    if op and on and np.all(fb[pos] != 0) and np.all(fb[neg] != 0):
+        poly_p = tuple(float(c) for c in fit_polynomial(vb[pos], fb[pos], op))
+        poly_n = tuple(float(c) for c in fit_polynomial(vb[neg], fb[neg], on))
+        # a polynomial in v cannot follow a Stribeck dip over a wide log-speed range and
+        # swings between the bins: kept only if it stays within 5 % (+ 0.05 N m) of the
+        # parametric fit over the whole valid range (it replaces it there in the map)
+        lo, hi = fit.valid_range
+        grid = np.geomspace(lo, hi, 400)
+        worst = 0.0
+        for coef, vv in ((poly_p, grid), (poly_n, -grid)):
+            ref = fit.torque(vv)
+            dev = np.abs(np.polynomial.polynomial.polyval(vv, coef) - ref)
+            worst = max(worst, float(np.max(dev / (0.05 * np.abs(ref) + 0.05))))
+        if worst > 1.0:
+            warnings.append(f'{name}: the per-sign polynomials leave the parametric fit by '
+                            f'{worst:.1f} x the 5 % band within the valid range: parametric '
+                            'model only')
+            poly_p = poly_n = None
+    else:
+        warnings.append(f'{name}: too few speed bins for polynomials: parametric model only')
+    s_ok = fit.stribeck_identified
+    jf = JointFriction(
+        coulomb=fit.coulomb, static=fit.static if s_ok else fit.coulomb,
+        stribeck_velocity=fit.stribeck_velocity, viscous=fit.viscous,
+        valid_range=tuple(float(x) for x in fit.valid_range), polynomial_positive=poly_p,
+        polynomial_negative=poly_n, ci95=dict(fit.ci95),
+        coulomb_positive=fit.coulomb_positive, coulomb_negative=fit.coulomb_negative,
+        static_positive=fit.static if s_ok else None,
+        static_negative=fit.static if s_ok else None, offset=fit.offset,
+        degenerate_reason='; '.join(fit.problems))
+    return JointResult(name, [], friction=jf, warnings=warnings, method='samples', sample=fit,
+                       degenerate=list(fit.problems), binned=(vb, fb))
+
+
+def report_entry(r: JointResult) -> dict:
+    """The JSON report's entry of one joint."""
+    entry = {'method': r.method, 'error': r.error, 'warnings': list(r.warnings),
+             'degenerate': bool(r.degenerate), 'degenerate_reasons': list(r.degenerate)}
+    if r.method == 'sweep':
+        entry.update(speeds=len(r.points), hold_time_s=r.hold_time_s, rejected_segments=[
+            {'bag': label, 'speed_rad_s': x.speed, 't_start_s': x.t_start, 't_end_s': x.t_end,
+             'reason': x.reason} for label, x in r.rejected])
+        if r.parametric is not None:
+            pf = r.parametric
+            entry.update(coulomb=pf.coulomb, static=pf.static,
+                         stribeck_velocity=pf.stribeck_velocity, viscous=pf.viscous,
+                         ci95=pf.ci95, rmse=pf.rmse)
+    elif r.sample is not None:
+        fit = r.sample
+        entry.update(
+            offset=fit.offset, coulomb_positive=fit.coulomb_positive,
+            coulomb_negative=fit.coulomb_negative, coulomb=fit.coulomb, static=fit.static,
+            stribeck_velocity=fit.stribeck_velocity if fit.stribeck_identified else None,
+            viscous=fit.viscous, ci95=fit.ci95, rmse=fit.rmse,
+            rmse_symmetric_no_offset=fit.rmse_symmetric, samples=fit.samples,
+            blocks=fit.blocks, stribeck_identified=fit.stribeck_identified,
+            offset_identified=fit.offset_identified)
+    if r.friction is not None:
+        entry['valid_range'] = list(r.friction.valid_range)
+    return entry
+
+
+def summary_line(r: JointResult) -> str:
+    """One log line per joint with the fitted figures."""
+    if r.error:
+        return r.error
+    j = r.friction
+    ci = j.ci95
+
+    def pm(key, val, unit):
+        return f'{val:.4g} ± {ci[key]:.2g} {unit}' if key in ci else f'{val:.4g} {unit}'
+    text = (f'{r.name} [{r.method}]: F_c+ {pm("coulomb_positive", j.coulomb_positive, "N m")}'
+            f', F_c- {pm("coulomb_negative", j.coulomb_negative, "N m")}, '
+            if not j.symmetric else f'{r.name} [{r.method}]: F_c '
+            f'{pm("coulomb", j.coulomb, "N m")}, ')
+    text += (f'F_s {pm("static", j.static, "N m")}, v_s '
+             f'{pm("stribeck_velocity", j.stribeck_velocity, "rad/s")}, ' if j.static != j.coulomb
+             else 'no Stribeck term, ')
+    text += f'F_v {pm("viscous", j.viscous, "N m s/rad")}'
+    if j.offset:
+        text += f', offset {pm("offset", j.offset, "N m")}'
+    if r.degenerate:
+        text += ' -- DEGENERATE: ' + '; '.join(r.degenerate)
+    return text
+
+
+__all__ = ['PipelineConfig', 'identify_joints', 'report_entry', 'summary_line',
+           'IdentificationError', 'acceleration']

@@ -1,0 +1,231 @@
+"""Identification from a stream of JointState messages (the `identifier` node's core). No rclpy.
+
+``StreamIdentifier`` keeps the raw CDR payloads it is given (bounded: ``max_messages``; the
+rest are counted as dropped), reads `replay`'s end-of-stream status (JSON, see
+``replay_status``), decides when the stream is over (``due``: the replay finished and every
+message it published arrived, or nothing came for ``quiet_period_s``) and ``compute`` runs the
+same code path as the offline `identify` (vectorised decoding, pipeline.identify_joints,
+friction_fit.friction_map) and writes the map and the JSON report. A stream that ended short
+of what the replay announced (a replay killed midway, lost messages) gives no map unless
+partial results are allowed; then the map's source and the report say ``partial``.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .friction_fit import IdentificationError, friction_map
+from .pipeline import PipelineConfig, identify_joints, report_entry, summary_line
+from .series import JointStateError, decode_joint_states
+
+
+def replay_status(state: str, bag: str, topics: dict, published: dict | None = None,
+                  reason: str = '') -> str:
+    """The JSON text `replay` publishes on its status topic: ``state`` is playing, finished,
+    stopped or failed; ``topics``: messages per topic in the bag (what will be played);
+    ``published``: messages published so far."""
+    return json.dumps({'state': state, 'bag': str(bag), 'topics': topics,
+                       'published': published or {}, 'reason': reason})
+
+
+@dataclass
+class StreamConfig:
+    """topic: the JointState topic (for the expected count); max_messages: memory bound;
+    quiet_period_s [s]: no message for this long ends a stream (0 = only the replay's end
+    signal or a service call); allow_partial: write a map from an incomplete stream (marked
+    partial); torque_kind: friction or total; joints, name_map: as identify --joints,
+    --map-joint; out_map, out_report: where to write; fill_nominal: failed model joints
+    from the nominal map (as identify --fill-nominal); plots_dir: one figure per joint
+    there ('' = none)."""
+
+    topic: str = '/joint_states'
+    max_messages: int = 2_000_000
+    quiet_period_s: float = 2.0
+    allow_partial: bool = False
+    torque_kind: str = 'total'
+    joints: list = field(default_factory=list)
+    name_map: dict = field(default_factory=dict)
+    out_map: str = 'identified_friction_map.yaml'
+    out_report: str = ''
+    fill_nominal: bool = False
+    plots_dir: str = ''
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+
+
+@dataclass
+class StreamOutcome:
+    """What ``compute`` did: ok (a map was written), the map path, per-joint log lines, the
+    error line (if no map), the report written."""
+
+    ok: bool
+    map_path: str
+    lines: list
+    error: str
+    report: dict
+
+
+class StreamIdentifier:
+    def __init__(self, config: StreamConfig, model=None):
+        self.config = config
+        self.model = model
+        self.reset()
+
+    def reset(self) -> None:
+        self.data: list[bytes] = []
+        self.recv_ns: list[int] = []
+        self.dropped = 0
+        self.last_wall = None          # monotonic time [s] of the last message
+        self.status: dict | None = None
+        self.computed = False
+
+    # --- input ---------------------------------------------------------------------------
+    def add(self, payload: bytes, recv_ns: int, wall_s: float) -> None:
+        if self.computed:              # a new stream after a result: start over
+            self.reset()
+        if len(self.data) >= self.config.max_messages:
+            self.dropped += 1
+        else:
+            self.data.append(bytes(payload))
+            self.recv_ns.append(int(recv_ns))
+        self.last_wall = wall_s
+
+    def on_status(self, text: str) -> None:
+        try:
+            st = json.loads(text)
+            if isinstance(st, dict) and 'state' in st:
+                if st['state'] == 'playing' and self.computed:
+                    self.reset()
+                self.status = st
+        except json.JSONDecodeError:
+            pass
+
+    @property
+    def received(self) -> int:
+        return len(self.data) + self.dropped
+
+    def expected(self) -> int | None:
+        if not self.status:
+            return None
+        n = self.status.get('topics', {}).get(self.config.topic)
+        return int(n) if n is not None else None
+
+    def due(self, wall_s: float) -> str | None:
+        """Why the stream is over now ('finished', 'stopped', 'quiet'), or None."""
+        if self.computed:
+            return None
+        st = (self.status or {}).get('state')
+        exp = self.expected()
+        if st == 'finished' and exp is not None and self.received >= exp:
+            return 'finished'
+        quiet = (self.last_wall is not None and self.config.quiet_period_s > 0
+                 and wall_s - self.last_wall >= self.config.quiet_period_s)
+        if st in ('finished', 'stopped', 'failed') and (quiet or self.last_wall is None):
+            return st
+        if quiet:
+            return 'quiet'
+        return None
+
+    def progress(self) -> str:
+        exp = self.expected()
+        return (f'{self.received} messages received' + (f' of {exp}' if exp else '')
+                + (f' ({self.dropped} over max_messages, not kept)' if self.dropped else ''))
+
+    # --- result ----------------------------------------------------------------------------
+    def compute(self, trigger: str, progress=None) -> StreamOutcome:
+        """Identify from what was received; write map and report. Never raises for bad
+        data: the outcome carries the one-line error."""
+        cfg = self.config
+        self.computed = True
+        exp = self.expected()
+        st = (self.status or {}).get('state')
+        complete = (exp is not None and self.received == exp and st == 'finished'
+                    and not self.dropped)
+        stream = {'trigger': trigger, 'received': self.received, 'kept': len(self.data),
+                  'dropped_over_max': self.dropped, 'expected': exp, 'replay_state': st,
+                  'bag': (self.status or {}).get('bag'), 'complete': complete,
+                  'partial': False}
+        report = {'out': cfg.out_map, 'stream': stream, 'joints': {}, 'problems': [],
+                  'ok': False}
+        why_partial = ''
+        if not complete:
+            if exp is None:
+                why_partial = (f'no end-of-stream signal from replay (ended: {trigger}); '
+                               f'{self.received} messages')
+            elif self.received != exp or st != 'finished' or self.dropped:
+                why_partial = (f'received {self.received} of the {exp} messages the replay '
+                               f'announced (replay {st or "unknown"}, ended: {trigger})')
+        # a stream without a replay (live) is complete when it ended quietly or on request
+        live = exp is None and trigger in ('quiet', 'service')
+        if why_partial and not live:
+            if not cfg.allow_partial:
+                return self._fail(report, f'incomplete stream: {why_partial}; no map (set '
+                                  'allow_partial to write one marked partial)')
+            stream['partial'] = True
+            report['problems'].append(f'partial: {why_partial}')
+        if not self.data:
+            return self._fail(report, f'no {cfg.topic} message received')
+        try:
+            s = decode_joint_states(self.data, self.recv_ns)
+        except JointStateError as exc:
+            return self._fail(report, f'{cfg.topic}: {exc}')
+        finite = (np.isfinite(s.position).all(axis=1) & np.isfinite(s.velocity).all(axis=1)
+                  & np.isfinite(s.effort).all(axis=1))
+        bad = int(np.count_nonzero(~finite))
+        if bad:
+            report['problems'].append(f'{bad} samples with NaN or infinite values left out')
+            s = type(s)(s.t[finite], s.names, s.position[finite], s.velocity[finite],
+                        s.effort[finite])
+        stream['nan_samples'] = bad
+        label = Path(str((self.status or {}).get('bag') or 'stream')).name
+        try:
+            results = identify_joints([s], [label], [cfg.torque_kind], cfg.joints or None,
+                                      cfg.name_map, self.model, cfg.pipeline,
+                                      progress=progress)
+            for r in results:
+                report['joints'][r.name] = report_entry(r)
+            source = f'identified by the identifier node from {label}'
+            if stream['partial']:
+                source = f'PARTIAL ({why_partial}): {source}'
+            fill = None
+            if cfg.fill_nominal and self.model is not None and all(
+                    r.name in self.model.joint_names for r in results):
+                fill = self.model.friction
+            fmap = friction_map(results, source, fill)
+        except IdentificationError as exc:
+            return self._fail(report, str(exc))
+        out = Path(cfg.out_map)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(f'.{out.name}.tmp{os.getpid()}')
+        fmap.save(tmp)
+        os.replace(tmp, out)
+        if cfg.plots_dir:
+            import re
+
+            from .plots import plot_joint
+            Path(cfg.plots_dir).mkdir(parents=True, exist_ok=True)
+            for r in results:
+                safe = re.sub(r'[^A-Za-z0-9_.-]+', '_', r.name)
+                report['joints'][r.name]['plot'] = str(plot_joint(
+                    r, Path(cfg.plots_dir) / f'{out.stem}_{safe}.png'))
+        trusted = [r.name for r in results if not r.error and not r.degenerate]
+        report.update(ok=bool(trusted), identified=trusted,
+                      failed=[r.name for r in results if r.error],
+                      degenerate=[r.name for r in results if r.degenerate])
+        self._write_report(report)
+        lines = [summary_line(r) for r in results]
+        return StreamOutcome(bool(trusted), str(out), lines, '' if trusted else
+                             'no joint has a trusted fit', report)
+
+    def _fail(self, report: dict, message: str) -> StreamOutcome:
+        report['error'] = message
+        self._write_report(report)
+        return StreamOutcome(False, '', [], message, report)
+
+    def _write_report(self, report: dict) -> None:
+        path = self.config.out_report or str(Path(self.config.out_map).with_suffix('.json'))
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(report, indent=2, default=float))

@@ -1,0 +1,294 @@
+"""identifier node (issue 21): replay -> identifier gives the offline identify's map.
+
+In-process: private Context, replay and identifier in one executor, replay's player in its
+thread; every wait is on a condition with a generous bound (no sleeps). Oracle for the map:
+the offline `identify` on the same bag (a separate reader path: rosbags + the vectorised
+decoder), which must agree within 1e-9 when every message arrived.
+"""
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+from irb_description.friction import load_friction_map
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.parameter import Parameter  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from irb_identification import identify  # noqa: E402
+from irb_identification.bagio import BagWriter, TopicInfo, qos_profile_dict  # noqa: E402
+from irb_identification.identifier_node import IdentifierNode  # noqa: E402
+from irb_identification.offline_sim import SimConfig, simulate  # noqa: E402
+from irb_identification.profiles import ConstantVelocityProfile  # noqa: E402
+from irb_identification.replay_node import ReplayNode  # noqa: E402
+from irb_identification.series import JOINT_STATE, encode_joint_states  # noqa: E402
+from irb_identification.stream import StreamConfig, StreamIdentifier, replay_status  # noqa
+
+pytestmark = pytest.mark.ros
+SPEEDS = (0.4, 0.6, 0.9, 1.3, 1.8)
+
+
+def params(**kw):
+    return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+def spin_until(executor, cond, timeout=60.0):
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.05)
+    return cond()
+
+
+@pytest.fixture(scope='module')
+def sweep_bag(model, tmp_path_factory):
+    """One bag: eq. 4.1 on joint_3 at five speeds back to back (offline plant, noise), like
+    a recorder of a whole identification session: 248 Hz, best effort."""
+    cfg = SimConfig(velocity_noise=0.002, effort_noise=0.5, seed=5)
+    parts, t0 = [], 0.0
+    for c in SPEEDS:
+        run = simulate(model, model.friction,
+                       ConstantVelocityProfile.for_speed(c, stroke_rad=0.4), 2, config=cfg)
+        parts.append((run.t + t0, run.q, run.qd, run.tau))
+        t0 += run.t[-1] + 0.004032
+    t, q, qd, tau = (np.concatenate([p[k] for p in parts]) for k in range(4))
+    path = tmp_path_factory.mktemp('ident') / 'session'
+    t_ns = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    payloads = encode_joint_states(t_ns, list(model.joint_names), q, qd, tau)
+    clock = [0.0]
+    with BagWriter(path, split_period_s=2.0, clock=lambda: clock[0]) as w:
+        w.add_topic(TopicInfo.for_type('/joint_states', JOINT_STATE,
+                                       [qos_profile_dict('best_effort', depth=1)]))
+        for tk, ns, data in zip(t, t_ns, payloads):
+            clock[0] = float(tk)
+            w.write('/joint_states', int(ns), data)
+    return path, len(t), float(t[-1])
+
+
+@pytest.fixture(scope='module')
+def offline_map(sweep_bag, tmp_path_factory):
+    out = tmp_path_factory.mktemp('offline') / 'map.yaml'
+    assert identify.main(['--bag', str(sweep_bag[0]), '--out', str(out), '--no-plots',
+                          '--joints', 'joint_3']) == 0
+    return load_friction_map(out)
+
+
+def _pair(context, executor, bag, tmp_path, rate, **ident_kw):
+    out = tmp_path / f'map_{rate:g}.yaml'
+    ident = IdentifierNode(context=context, parameter_overrides=params(
+        out_map=str(out), quiet_period_s=5.0, progress_period_s=0.0, joints=['joint_3'],
+        **ident_kw))
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bag=str(bag), rate=float(rate), wait_for_subscribers=1, wait_timeout_s=30.0,
+        reliable=True, depth=20000, start_delay_s=0.0))
+    executor.add_node(ident)
+    executor.add_node(player)
+    thread = threading.Thread(target=player.run, daemon=True)
+    thread.start()
+    return ident, player, thread, out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('rate', [1.0, 10.0, 0.0])
+def test_replay_into_identifier_gives_the_offline_map(ctx, sweep_bag, offline_map, tmp_path,
+                                                      rate):
+    context, executor = ctx
+    bag, n_msgs, span = sweep_bag
+    ident, player, thread, out = _pair(context, executor, bag, tmp_path, rate)
+    latched = []
+    sub = ident.create_subscription(
+        __import__('std_msgs.msg', fromlist=['String']).String, '/identifier/friction_map',
+        lambda m: latched.append(m.data),
+        __import__('irb_description.node_main', fromlist=['x']).latched_qos())
+    assert spin_until(executor, lambda: ident.outcome is not None and str(out) in latched,
+                      timeout=span / max(rate, 1.0) + 90.0)
+    thread.join(timeout=10)
+    outcome = ident.outcome
+    assert outcome.ok, outcome.error
+    report = outcome.report
+    # nothing lost: the identifier counted what the replay announced and published
+    assert report['stream']['received'] == report['stream']['expected'] == n_msgs
+    assert report['stream']['complete'] and report['stream']['trigger'] == 'finished'
+    assert player.published['/joint_states'] == n_msgs
+    got = load_friction_map(out)
+    assert got.joint_names == offline_map.joint_names
+    for a, b in zip(got.joints, offline_map.joints):
+        for key in ('coulomb', 'static', 'stribeck_velocity', 'viscous'):
+            assert getattr(a, key) == pytest.approx(getattr(b, key), abs=1e-9), key
+        assert (a.polynomial_positive is None) == (b.polynomial_positive is None)
+        if a.polynomial_positive is not None:
+            np.testing.assert_allclose(a.polynomial_positive, b.polynomial_positive,
+                                       atol=1e-9)
+        np.testing.assert_allclose(a.torque(np.linspace(-2, 2, 41)),
+                                   b.torque(np.linspace(-2, 2, 41)), atol=1e-9)
+        assert a.valid_range == pytest.approx(b.valid_range, abs=1e-12)
+    assert report['joints']['joint_3']['method'] == 'sweep'
+    ident.destroy_subscription(sub)
+    for node in (ident, player):
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def test_stream_core_bad_inputs(tmp_path, model):
+    """Other joint names, no motion, NaN samples, a replay stopped midway: one line each,
+    partial only on request and marked partial (the node logs exactly these lines)."""
+    def core(**kw):
+        return StreamIdentifier(StreamConfig(out_map=str(tmp_path / 'm.yaml'), **kw), model)
+
+    n = 3000
+    t_ns = 10**18 + np.arange(n) * 4_032_000
+    v = 0.5 * np.sin(np.arange(n) * 0.004032 * 2.0)
+    q = np.cumsum(v) * 0.004032
+    tf = np.sign(v) * 2 + 0.8 * v
+    one = encode_joint_states(t_ns, ['axis'], q[:, None], v[:, None], tf[:, None])
+    # other joint names with total torque: refused with the names
+    c = core(torque_kind='total')
+    for k, d in enumerate(one):
+        c.add(d, int(t_ns[k]), 0.0)
+    out = c.compute('quiet')
+    assert not out.ok and 'axis' in out.error and '--torque-kind friction' in out.error
+    assert json.loads((tmp_path / 'm.json').read_text())['error'] == out.error
+    # no motion
+    c = core(torque_kind='friction')
+    still = encode_joint_states(t_ns, ['axis'], q[:, None] * 0, v[:, None] * 0, tf[:, None])
+    for k, d in enumerate(still):
+        c.add(d, int(t_ns[k]), 0.0)
+    out = c.compute('quiet')
+    assert not out.ok and 'axis: 0 samples above v_min = 0.01 rad/s' in out.error
+    assert '|v| seen: 0..0 rad/s' in out.report['joints']['axis']['error']
+    # NaN samples are left out and counted; the rest identifies
+    bad = v.copy()
+    bad[::50] = np.nan
+    c = core(torque_kind='friction')
+    for k, d in enumerate(encode_joint_states(t_ns, ['axis'], q[:, None], bad[:, None],
+                                              tf[:, None])):
+        c.add(d, int(t_ns[k]), 0.0)
+    out = c.compute('quiet')
+    assert out.ok, out.error
+    assert out.report['stream']['nan_samples'] == 60
+    # a replay stopped midway: announced 3000, got 1000 -> no map unless allowed
+    for allow in (False, True):
+        c = core(torque_kind='friction', allow_partial=allow)
+        c.on_status(replay_status('playing', 'bagX', {'/joint_states': n}))
+        for k, d in enumerate(one[:1000]):
+            c.add(d, int(t_ns[k]), 1.0)
+        c.on_status(replay_status('stopped', 'bagX', {'/joint_states': n},
+                                  {'/joint_states': 1000}))
+        assert c.due(1.5) is None                # quiet period not over yet
+        assert c.due(3.5) == 'stopped'
+        out = c.compute('stopped')
+        if not allow:
+            assert not out.ok and 'incomplete stream: received 1000 of the 3000' in out.error
+        else:
+            assert out.ok and out.report['stream']['partial']
+            assert 'PARTIAL' in load_friction_map(tmp_path / 'm.yaml').source
+
+
+def test_services_compute_and_reset(ctx, tmp_path):
+    """~/compute with nothing received: a clear failure, no crash; ~/reset answers."""
+    context, executor = ctx
+    ident = IdentifierNode(context=context, parameter_overrides=params(
+        out_map=str(tmp_path / 'm.yaml'), progress_period_s=0.0, topic='/nobody_here'))
+    executor.add_node(ident)
+    client = ident.create_client(Trigger, '/identifier/compute')
+    assert spin_until(executor, client.service_is_ready, 30.0)
+    fut = client.call_async(Trigger.Request())
+    assert spin_until(executor, fut.done, 60.0)
+    assert not fut.result().success and 'no /nobody_here message' in fut.result().message
+    reset = ident.create_client(Trigger, '/identifier/reset')
+    assert spin_until(executor, reset.service_is_ready, 30.0)
+    fut = reset.call_async(Trigger.Request())
+    assert spin_until(executor, fut.done, 30.0) and fut.result().success
+
+
+def _read_until(proc, needle, timeout):
+    """Lines of ``proc``'s merged output until one holds ``needle`` (select with a bound)."""
+    import select
+    lines, end = [], time.monotonic() + timeout
+    while time.monotonic() < end:
+        ready, _, _ = select.select([proc.stdout], [], [], max(end - time.monotonic(), 0))
+        if not ready:
+            break
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if needle in line:
+            return lines
+    raise AssertionError(f'{needle!r} not seen within {timeout} s: {"".join(lines)[-2000:]}')
+
+
+@pytest.mark.slow
+def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map, tmp_path,
+                                                          domain_id):
+    """`ros2 run` processes: replay at rate 0 (as fast as possible) with reliable keep-all
+    publishers into the identifier; the slower Python subscriber holds the replay back
+    instead of losing messages; the map equals the offline one."""
+    import os
+    import subprocess
+    bag, n_msgs, _ = sweep_bag
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    out = tmp_path / 'proc_map.yaml'
+    ident = subprocess.Popen(
+        ['ros2', 'run', 'irb_identification', 'identifier', '--ros-args', '-p',
+         f'out_map:={out}', '-p', 'joints:=[joint_3]', '-p', 'quiet_period_s:=20.0'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+        start_new_session=True)          # the ros2 launcher and the node: one group
+    try:
+        _read_until(ident, 'waiting for publishers', 60)
+        replay = subprocess.run(
+            ['ros2', 'run', 'irb_identification', 'replay', '--ros-args', '-p', f'bag:={bag}',
+             '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'reliable:=true'],
+            capture_output=True, text=True, env=env, timeout=180)
+        assert replay.returncode == 0, replay.stderr
+        lines = _read_until(ident, 'wrote', 120)
+        assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
+    finally:
+        os.killpg(ident.pid, __import__('signal').SIGINT)
+        assert ident.wait(timeout=30) == 0
+    got = load_friction_map(out)
+    for a, b in zip(got.joints, offline_map.joints):
+        np.testing.assert_allclose(a.torque(np.linspace(-2, 2, 41)),
+                                   b.torque(np.linspace(-2, 2, 41)), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_several_bags_as_one_stream(ctx, model, tmp_path):
+    """The main job's pairing: one bag per (joint, speed), replayed with ``bags`` as one
+    stream into the identifier: the offline identify's map within its intervals."""
+    from irb_identification.offline_sim import write_run_bag
+    bags, start = [], 1_700_000_000 * 10**9
+    for c in SPEEDS:                 # recorded one after the other: later stamps each
+        run = simulate(model, model.friction, ConstantVelocityProfile.for_speed(
+            c, stroke_rad=0.4), 2, config=SimConfig(velocity_noise=0.002, effort_noise=0.5,
+                                                   seed=9))
+        bags.append(write_run_bag(run, tmp_path / f'b_{c}', list(model.joint_names), start))
+        start += int(run.t[-1] * 1e9) + 10**9
+    off = tmp_path / 'off.yaml'
+    assert identify.main(sum((['--bag', str(b)] for b in bags), []) + [
+        '--out', str(off), '--no-plots', '--joints', 'joint_3']) == 0
+    offline = load_friction_map(off).joints[0]
+    context, executor = ctx
+    out = tmp_path / 'stream.yaml'
+    ident = IdentifierNode(context=context, parameter_overrides=params(
+        out_map=str(out), quiet_period_s=5.0, progress_period_s=0.0, joints=['joint_3'],
+        fill_nominal=True))
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bags=[str(b) for b in bags], rate=0.0, wait_for_subscribers=1, reliable=True,
+        start_delay_s=0.0))
+    executor.add_node(ident)
+    executor.add_node(player)
+    thread = threading.Thread(target=player.run, daemon=True)
+    thread.start()
+    assert spin_until(executor, lambda: ident.outcome is not None, 120.0)
+    thread.join(timeout=10)
+    assert ident.outcome.ok, ident.outcome.error
+    stream = ident.outcome.report['stream']
+    assert stream['complete'] and stream['received'] == sum(player.counts.values())
+    got = load_friction_map(out).joints[0]
+    for key in ('coulomb', 'viscous'):
+        assert abs(getattr(got, key) - getattr(offline, key)) <= offline.ci95[key], key
+    for node in (ident, player):
+        executor.remove_node(node)
+        node.destroy_node()
