@@ -295,7 +295,8 @@ def bench_soak(minutes: float, path: str, load: bool, rt: int = 0) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
         out = {'benchmark': f'soak: {path} path + pdplus + recorder, enabled again after '
                             'every motion', 'minutes': minutes, 'path': path,
-               'cpu_load_process': load, 'realtime_priority': rt, 'motions': motions, 'stops': len(stops),
+               'cpu_load_process': load, 'realtime_priority': rt, 'motions': motions,
+               'stops': len(stops),
                'stops_per_hour': len(stops) / hours if hours else None,
                'stops_by_reason': reasons, 'stop_list': stops[:50],
                'load_average_1_5_15_min_at_start': load_start}

@@ -628,8 +628,9 @@ def check_joint_path(model: RobotModel, path: PathBase, samples: int = 4096,
     arm, where the elbow would change branch).
 
     ``samples`` theta values over [0, 2 pi] plus the pieces' ends; between two samples a
-    joint cannot pass a limit unseen: the check uses max(q_k, q_k+1) + |q''| dtheta^2 / 8 (the largest excursion of a
-    function with that curvature above its chord), q'' by finite differences.
+    joint cannot pass a limit unseen: the check uses max(q_k, q_k+1) + |q''| dtheta^2 / 8 (the
+    largest excursion of a function with that curvature above its chord), q'' by finite
+    differences.
     """
     theta = np.union1d(np.linspace(0.0, 2.0 * np.pi, samples), path.breaks)
     pts = path.point(theta)

@@ -110,7 +110,8 @@ def fill_response(resp: PlanPath.Response, result: PlanResult, nodes: dict
     resp.error_code = PlanPath.Response.ERROR_NONE
     resp.message = '; '.join([f'{result.objective} plan, {ver.duration:.3f} s, '
                               f'{ver.energy:.2f} J as played, {len(nodes["t"])} points, '
-                              f'path error <= {ver.max_path_deviation * 1e6:.1f} um'] + result.notes)
+                              f'path error <= {ver.max_path_deviation * 1e6:.1f} um']
+                             + result.notes)
     resp.trajectory = trajectory_msg(result, nodes)
     resp.theta = result.profile.theta.tolist()
     resp.theta_dot = result.profile.theta_dot.tolist()
