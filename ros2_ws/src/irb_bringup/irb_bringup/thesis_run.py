@@ -177,8 +177,12 @@ def main(args=None) -> int:
     t_start = time.monotonic()
     lines = Lines(a.verbose)
     plant_yaml = Path(get_package_share_directory('irb_control')) / 'config' / 'plant.yaml'
-    sim = ProcessSpec('simulator', ros2_run_cmd('irb_control', 'simulator',
-                                                params={'mode': 'lockstep'}))
+    # lockstep: simulated time waits for pdplus; lockstep_wait_s is only the wall time after
+    # which a silent pdplus counts as a missed sample. 50 ms (the default) latched "no command
+    # for 16 ms" while the planner solved the rectangle on the same 2 cores
+    sim = ProcessSpec('simulator', ros2_run_cmd(
+        'irb_control', 'simulator', params={'mode': 'lockstep',
+                                            'lockstep_wait_s': cfg['lockstep_wait_s']}))
     link = None
     groups = []
 
