@@ -25,6 +25,12 @@ OBJECTIVE_TRAPEZOID = 'trapezoid'
 OBJECTIVE_FOURIER = 'fourier'
 OBJECTIVES = (OBJECTIVE_ENERGY, OBJECTIVE_TIME, OBJECTIVE_TRAPEZOID, OBJECTIVE_FOURIER)
 
+#: what the energy objective minimises: the thesis's mechanical int sum |tau qd| dt, or the
+#: electrical energy from the grid (irb_description.electrical) with the given DC-bus mode
+ENERGY_MECHANICAL = 'mechanical'
+ENERGY_MODELS = {ENERGY_MECHANICAL: None, 'electrical_none': 'none',
+                 'electrical_shared': 'shared', 'electrical_regenerative': 'regenerative'}
+
 PATH_CIRCLE = 'circle'
 MIN_GRID = 20
 #: smallest fraction of the speed/torque limits a request may ask for
@@ -67,6 +73,7 @@ class PlanRequest:
     friction_map: str = ''
     boundary: str = ''
     path_type: str = PATH_CIRCLE
+    energy_model: str = ''               # one of ENERGY_MODELS; '' = mechanical
 
     @property
     def path_key(self) -> tuple:
@@ -120,6 +127,11 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
     scaling = req.limit_scaling or 1.0
     if not MIN_LIMIT_SCALING <= scaling <= 1:
         bad(f'limit_scaling must be in [{MIN_LIMIT_SCALING:g}, 1], got {req.limit_scaling}')
+    energy_model = req.energy_model or ENERGY_MECHANICAL
+    if energy_model not in ENERGY_MODELS:
+        bad(f'unknown energy_model {req.energy_model!r}; one of {list(ENERGY_MODELS)}')
+    if energy_model != ENERGY_MECHANICAL and req.objective == OBJECTIVE_FOURIER:
+        bad('the Fourier profile minimises mechanical energy only')
     boundary = req.boundary or BOUNDARY_REST
     if req.objective == OBJECTIVE_FOURIER:
         if req.boundary and req.boundary != BOUNDARY_PERIODIC:
@@ -135,4 +147,4 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
     start = start + 2 * math.pi if start < 0 else start
     return replace(req, center=np.asarray(req.center, float), direction=int(direction),
                    start_angle=start, grid_size=grid, limit_scaling=scaling,
-                   boundary=boundary)
+                   boundary=boundary, energy_model=energy_model)
