@@ -14,6 +14,15 @@ def test_energy_model_is_validated():
                     100).energy_model == 'electrical_none'
 
 
+def test_energy_model_names_equal_the_service_constants():
+    srv = pytest.importorskip('irb_interfaces.srv')
+    R = srv.PlanPath.Request
+    from irb_planning.request import ENERGY_MODELS
+    assert sorted(ENERGY_MODELS) == sorted([
+        R.ENERGY_MECHANICAL, R.ENERGY_ELECTRICAL_NONE, R.ENERGY_ELECTRICAL_SHARED,
+        R.ENERGY_ELECTRICAL_REGENERATIVE])
+
+
 @pytest.mark.slow
 def test_electrical_objective_checked_by_both_evaluators():
     planner = Planner()
