@@ -17,6 +17,7 @@ from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from rclpy.executors import SingleThreadedExecutor
 
+from .costs import time_weight
 from .plot import plot_plan
 
 
@@ -36,6 +37,9 @@ def parse_args(argv):
     p.add_argument('--limit-scaling', type=float, default=0.0, help='(0, 1], 0 = 1')
     p.add_argument('--friction-map', default='', help="friction-map YAML, '' = nominal")
     p.add_argument('--boundary', default='', help="'' = rest, or periodic")
+    p.add_argument('--energy-price', type=float, default=0.0,
+                   help='[currency/kWh]; with --machine-hour-cost sets --time-weight')
+    p.add_argument('--machine-hour-cost', type=float, default=0.0, help='[currency/h]')
     p.add_argument('--energy-model', default='',
                    help="mechanical | electrical_none | electrical_shared | "
                         "electrical_regenerative ('' = mechanical)")
@@ -51,6 +55,8 @@ def build_request(a) -> PlanPath.Request:
                                                                 z=a.center[2]),
                         radius=a.radius, start_angle=a.start_angle, direction=a.direction)
     req.objective, req.duration, req.time_weight = a.objective, a.duration, a.time_weight
+    if a.energy_price > 0:
+        req.time_weight = time_weight(a.energy_price, a.machine_hour_cost)
     req.fourier_order = a.order if a.objective == 'fourier' else 0
     req.grid_size, req.limit_scaling = a.grid, a.limit_scaling
     req.friction_map, req.boundary = a.friction_map, a.boundary
