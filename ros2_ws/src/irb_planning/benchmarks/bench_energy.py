@@ -90,6 +90,7 @@ def main():
             saving_vs_trapezoid_thesis_pct=100 * (1 - res.best_energy / base['trapezoid_j']),
             region_lower_bound_j=res.region_lower_bound,
             possible_improvement_pct=res.possible_improvement_pct,
+            cells_covered=res.cells_covered, cells_total=res.cells_total,
             certificate_cap_pct=100 * (1 - min(res.region_lower_bound, res.best_energy)
                                        / base['trapezoid_j']),
             refused=len(res.reasons), points=int(res.energy.size),

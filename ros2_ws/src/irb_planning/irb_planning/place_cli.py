@@ -66,6 +66,7 @@ def main(args=None):
                    best_energy_j=res.best_energy, measure=res.measure,
                    region_lower_bound_j=res.region_lower_bound,
                    possible_improvement_pct=res.possible_improvement_pct,
+                   cells_covered=res.cells_covered, cells_total=res.cells_total,
                    lipschitz_j_m=res.lipschitz.tolist(), evaluations=res.evaluations,
                    wall_time_s=res.wall_time, refused={str(k): v for k, v in
                                                        res.reasons.items()})

@@ -42,7 +42,7 @@ def test_search_finds_the_minimum_keeps_refused_points_and_bounds_the_region(tmp
     assert len(lines) >= res.energy.size                     # progress per grid point
     # the certificate's lower bound is below the true minimum over the reachable cells
     assert res.region_lower_bound <= 55.0
-    assert res.possible_improvement_pct >= 0
+    assert res.cells_covered == 4 * 4 * 3 * 2 - 4 * 3 * 2 and res.cells_total == 4 * 4 * 3 * 2
     assert plot_map(str(tmp_path / 'm.png'), res) and (tmp_path / 'm.png').stat().st_size > 0
 
 
@@ -50,11 +50,19 @@ def test_certificate_on_a_linear_field_is_exact():
     axes = [np.linspace(0, 1, 3), np.linspace(0, 2, 3), np.array([0.0])]
     X, Y = np.meshgrid(axes[0], axes[1], indexing='ij')
     E = (10 + 3 * X + 2 * Y)[:, :, None, None]
-    low, L = certificate(axes, E)
+    low, L, covered, total = certificate(axes, E)
+    assert covered == total == 4
     np.testing.assert_allclose(L, [3.0, 2.0, 0.0])
     # on a cell, min(corner) - (L_x h_x + L_y h_y) / 2 = 10 - (1.5 + 2) / 2
     assert low == pytest.approx(10 - 1.75)
     assert low <= 10.0                                        # the true minimum
+
+
+def test_a_cell_with_a_refused_corner_is_not_covered():
+    axes = [np.linspace(0, 1, 3), np.array([0.0]), np.array([0.0])]
+    E = np.array([5.0, np.nan, 7.0])[:, None, None, None]
+    low, _, covered, total = certificate(axes, E)
+    assert np.isnan(low) and covered == 0 and total == 2
 
 
 def test_everything_refused_gives_no_best():
