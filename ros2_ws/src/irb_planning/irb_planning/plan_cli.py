@@ -76,7 +76,7 @@ def summary(resp: PlanPath.Response) -> str:
                 if len(resp.baseline_electrical_energy) > k else '-')
         rows.insert(3 + k, (f'electrical {mode} [J]', f'{resp.electrical_energy[k]:.1f}', base))
     saving = 100 * (1 - resp.energy / resp.baseline_energy) if resp.baseline_energy else 0
-    lines = [f'{r[0]:<20}{r[1]:>22}{r[2]:>22}' for r in rows]
+    lines = [f'{r[0]:<28}{r[1]:>22}{r[2]:>22}' for r in rows]
     lines += [f'saving vs trapezoid: {saving:.2f} % (mechanical)']
     for k, mode in enumerate(resp.electrical_bus_modes):
         if len(resp.baseline_electrical_energy) > k and resp.baseline_electrical_energy[k]:
