@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'planner = irb_planning.planner_node:main',
             'plan = irb_planning.plan_cli:main',
+            'place = irb_planning.place_cli:main',
         ],
     },
 )

@@ -2,6 +2,11 @@
 
 Publishes /joint_states every period (real time) or as fast as the controller answers
 (lockstep, with /clock), the camera's TCP point at 100 Hz, and applies /torque_command.
+With each state it publishes ``electrical_power`` (sensor_msgs/JointState, same stamp): per
+axis the power drawn from the DC bus [W] in ``effort`` under the joint names, then the robot's
+total for each DC-bus mode under ``total_none``, ``total_shared``, ``total_regenerative``
+(standby included), from the plant's own electrical parameters (config/plant_electrical.yaml,
+irb_description.electrical), the applied torque and the true joint speed.
 """
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
+from irb_description.electrical import BUS_MODES, load_electrical
 from irb_description.model import RobotModel
 from irb_description.node_main import (declare, latched_qos, run_node, running, state_pub_qos,
                                        state_qos)
@@ -26,7 +32,8 @@ from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import apply_realtime, declare_realtime, make_executor
-from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
+from .plant import (Plant, PlantConfig, config_path, default_plant_yaml,
+                    load_plant_friction)
 from .plant_effects import load_plant_effects
 
 
@@ -80,6 +87,10 @@ class SimulatorNode(Node):
                                   "write loop statistics JSON here at exit ('' = no)"),
             'executor': declare(self, 'executor', 'events',
                                 "'events' (EventsExecutor, lower latency) or 'single'"),
+            'plant_electrical_file': declare(
+                self, 'plant_electrical_file', '',
+                "plant electrical parameters YAML ('' = config/plant_electrical.yaml); "
+                "'none' = do not publish electrical_power"),
         }
         self.realtime = declare_realtime(self)       # (priority, cpus), applied by _spin
         self.p = p
@@ -100,6 +111,12 @@ class SimulatorNode(Node):
         effects = load_plant_effects(p['plant_effects_file'] or ffile)
         self.plant = Plant(model, friction, self.config, effects)
         self.lockstep = p['mode'] == 'lockstep'
+        efile = p['plant_electrical_file'] or str(config_path('plant_electrical.yaml'))
+        self.electrical = (None if efile == 'none'
+                           else load_electrical(Path(efile)).axes(len(self.joint_names)))
+        self.pub_power = (self.create_publisher(JointState, 'electrical_power', state_pub_qos())
+                          if self.electrical is not None else None)
+        self._power_names = list(self.joint_names) + [f'total_{m}' for m in BUS_MODES]
         self.pub_state = self.create_publisher(JointState, 'joint_states', state_pub_qos())
         self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
                                              QoSProfile(depth=50))
@@ -210,6 +227,13 @@ class SimulatorNode(Node):
         key = sec * 1_000_000_000 + nanosec
         self._sent = {key: time.monotonic()}      # only the latest state can be answered
         self.pub_state.publish(data)
+        if self.pub_power is not None:
+            e, qd = self.electrical, self.plant.state.qd
+            pax = e.axis_power(y.tau, qd)
+            tot = [float(e.power(y.tau, qd, m)) for m in BUS_MODES]
+            msg = JointState(name=self._power_names, effort=pax.tolist() + tot)
+            msg.header.stamp = stamp
+            self.pub_power.publish(msg)
 
     def _after_step(self, stamp_of) -> None:
         self._status()

@@ -85,3 +85,41 @@ def test_camera_stamps_follow_sim_time_across_whole_seconds(sim):
     assert stamps.size == 484               # 0, 0.01, ..., 4.83 s
     np.testing.assert_allclose(np.diff(stamps), 0.01, atol=2e-9)
     np.testing.assert_allclose(stamps, 0.01 * np.arange(stamps.size), atol=2e-9)
+
+
+def test_electrical_power_from_the_plants_own_parameters(sim):
+    """electrical_power: per-axis and total power of the applied torque at the true speed,
+    from config/plant_electrical.yaml (not the planner's irb_description values), checked
+    by hand-written formulas here."""
+    import yaml
+    from irb_control.plant import config_path
+    sim.pub_state, sim.pub_power = _Capture(), _Capture()
+    sim.plant.reset(np.array([0.0, 0.9, 0.25]), np.array([0.5, -0.4, 0.3]))
+    tau = np.array([120.0, 80.0, -40.0])
+    sim.plant.measure = lambda: type('Y', (), {'q': sim.plant.state.q, 'tau': tau,
+                                               'qd': sim.plant.state.qd})()
+    stamp = _stamp(3.0)
+    sim._publish_state(stamp)
+    m = sim.pub_power.sent[-1]
+    assert m.header.stamp == stamp
+    assert list(m.name) == ['joint_1', 'joint_2', 'joint_3', 'total_none', 'total_shared',
+                            'total_regenerative']
+    d = yaml.safe_load(open(config_path('plant_electrical.yaml')))
+    ax = d['axes']
+    ratio = np.array([120.0, 120.0, 100.0])        # irb_description dynamics.yaml
+    qd = np.array([0.5, -0.4, 0.3])
+    expect = []
+    for i in range(3):
+        pj = tau[i] * qd[i]
+        eta = (ax['gear_efficiency_motoring'][i] if pj >= 0
+               else ax['gear_efficiency_generating'][i])
+        pg = pj / eta if pj >= 0 else pj * eta
+        tm = tau[i] / ratio[i] / eta if pj >= 0 else tau[i] / ratio[i] * eta
+        pe = pg + ax['resistance_ohm'][i] * (tm / ax['torque_constant_nm_a'][i]) ** 2
+        ed = d['drive']['efficiency']
+        expect.append((pe / ed if pe >= 0 else pe * ed) + ax['drive_idle_power_w'][i])
+    np.testing.assert_allclose(m.effort[:3], expect, rtol=1e-12)
+    sb = d['controller']['standby_power_w']
+    assert m.effort[3] == pytest.approx(sb + sum(max(p, 0) for p in expect))
+    assert m.effort[4] == pytest.approx(sb + max(sum(expect), 0))
+    assert expect[1] < 0 < m.effort[4] < m.effort[3]   # axis 2 generates, shared recovers it

@@ -3,8 +3,9 @@
 Shares no code with the CasADi problems: joint motion from the path (closed-form IK and
 Jacobians of irb_description), torques from pinocchio's RNEA plus the numpy friction map
 (``RobotModel.inverse_dynamics_with_friction``), energy by the trapezoidal rule in time over
-the 1 kHz samples, E = int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9, no regeneration).
-numpy only, no ROS.
+the 1 kHz samples, E = int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9, no regeneration), and,
+when an ``irb_description.electrical.ElectricalModel`` is given, the electrical energy of the
+same samples for every DC-bus mode. numpy only, no ROS.
 """
 from __future__ import annotations
 
@@ -33,7 +34,9 @@ class LimitSet:
 class Evaluation:
     """A profile resampled at ``rate`` [Hz]: t (M,) [s]; q, qd, qdd, tau, power (M, n) SI.
 
-    energy [J] = int sum_i |tau_i qd_i| dt; peak_* (n,); violations: one line per broken limit.
+    energy [J] = int sum_i |tau_i qd_i| dt; peak_* (n,); violations: one line per broken limit;
+    electrical: {'total_none'|'total_shared'|'total_regenerative'|'copper'|'standby'|...: J}
+    (ElectricalModel.breakdown; empty without an electrical model).
     """
 
     t: np.ndarray
@@ -49,6 +52,7 @@ class Evaluation:
     peak_torque: np.ndarray
     peak_speed: np.ndarray
     violations: list[str] = field(default_factory=list)
+    electrical: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -56,11 +60,12 @@ class Evaluation:
 
 
 def evaluate(profile: ThetaProfile, sample_path: Callable, torque: Callable,
-             limits: LimitSet, rate: float = 1000.0) -> Evaluation:
+             limits: LimitSet, rate: float = 1000.0, electrical=None) -> Evaluation:
     """Resample ``profile`` at ``rate`` [Hz] (plus the end point) and check it.
 
     sample_path(theta (M,)) -> object with q, dq, ddq (M, n) (irb_description JointPath);
-    torque(q, qd, qdd) with (M, n) arrays -> tau (M, n) [N m] (rigid body + friction).
+    torque(q, qd, qdd) with (M, n) arrays -> tau (M, n) [N m] (rigid body + friction);
+    electrical: an ElectricalModel of the n axes (or None).
     """
     T = profile.duration
     t = np.arange(0.0, T, 1.0 / rate)
@@ -90,5 +95,6 @@ def evaluate(profile: ThetaProfile, sample_path: Callable, torque: Callable,
             violations.append(f'joint {i + 1} leaves its position limits')
     if not np.all(np.isfinite(tau)):
         violations.append('non-finite torque')
+    elec = electrical.breakdown(t, tau, qd) if electrical is not None else {}
     return Evaluation(t, theta, theta_dot, jp.q, qd, qdd, tau, power, energy, T,
-                      peak_torque, peak_speed, violations)
+                      peak_torque, peak_speed, violations, elec)

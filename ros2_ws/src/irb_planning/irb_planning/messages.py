@@ -34,7 +34,8 @@ def request_from_msg(msg: PlanPath.Request) -> PlanRequest:
         boundary=msg.boundary, path_type=p.type or PathSpec.TYPE_CIRCLE,
         normal=np.array([p.normal.x, p.normal.y, p.normal.z], float), sweep=p.sweep,
         waypoints=np.array([[w.x, w.y, w.z] for w in p.waypoints], float).reshape(-1, 3),
-        blend_radii=np.asarray(p.blend_radii, float), closed=bool(p.closed))
+        blend_radii=np.asarray(p.blend_radii, float), closed=bool(p.closed),
+        energy_model=msg.energy_model)
 
 
 def path_msg(req: PlanRequest) -> PathSpec:
@@ -127,6 +128,17 @@ def fill_response(resp: PlanPath.Response, result: PlanResult, nodes: dict
     resp.solve_time = float(result.solve_time)
     resp.iterations = int(result.iterations)
     resp.solver_status = result.status
+    modes = ('none', 'shared', 'regenerative')
+    if ver.electrical:
+        resp.electrical_bus_modes = list(modes)
+        resp.electrical_energy = [float(ver.electrical[f'total_{m}']) for m in modes]
+        resp.copper_energy = float(ver.electrical['copper'])
+        resp.standby_energy = float(ver.electrical['standby'])
+    resp.optimizer_electrical_energy = float(result.optimizer_electrical_energy)
+    resp.energy_model = result.request.energy_model
+    if base is not None and base.electrical:
+        resp.baseline_electrical_energy = [float(base.electrical[f'total_{m}'])
+                                           for m in modes]
     if base is not None:
         resp.baseline_energy = base.energy
         resp.baseline_duration = base.duration

@@ -27,6 +27,7 @@ from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
 from rclpy.executors import SingleThreadedExecutor
 
+from .costs import time_weight
 from .messages import path_msg_from_spec
 from .plot import plot_plan
 
@@ -49,6 +50,12 @@ def parse_args(argv):
     p.add_argument('--limit-scaling', type=float, default=0.0, help='(0, 1], 0 = 1')
     p.add_argument('--friction-map', default='', help="friction-map YAML, '' = nominal")
     p.add_argument('--boundary', default='', help="'' = rest, or periodic")
+    p.add_argument('--energy-price', type=float, default=0.0,
+                   help='[currency/kWh]; with --machine-hour-cost sets --time-weight')
+    p.add_argument('--machine-hour-cost', type=float, default=0.0, help='[currency/h]')
+    p.add_argument('--energy-model', default='',
+                   help="mechanical | electrical_none | electrical_shared | "
+                        "electrical_regenerative ('' = mechanical)")
     p.add_argument('--service', default='plan_path')
     p.add_argument('--timeout', type=float, default=120.0, help='[s]')
     p.add_argument('--plot', default='plan.png', help="PNG path, '' = no plot")
@@ -80,9 +87,12 @@ def build_request(a) -> PlanPath.Request:
                             center=Point(x=a.center[0], y=a.center[1], z=a.center[2]),
                             radius=a.radius, start_angle=a.start_angle, direction=a.direction)
     req.objective, req.duration, req.time_weight = a.objective, a.duration, a.time_weight
+    if a.energy_price > 0:
+        req.time_weight = time_weight(a.energy_price, a.machine_hour_cost)
     req.fourier_order = a.order if a.objective == 'fourier' else 0
     req.grid_size, req.limit_scaling = a.grid, a.limit_scaling
     req.friction_map, req.boundary = a.friction_map, a.boundary
+    req.energy_model = a.energy_model
     return req
 
 
@@ -93,9 +103,21 @@ def summary(resp: PlanPath.Response) -> str:
             ('peak torque [N m]', ' '.join(f'{x:.1f}' for x in resp.peak_torque),
              ' '.join(f'{x:.1f}' for x in resp.baseline_peak_torque)),
             ('feasible', 'yes', 'yes' if resp.baseline_feasible else 'NO')]
+    for k, mode in enumerate(resp.electrical_bus_modes):
+        base = (f'{resp.baseline_electrical_energy[k]:.1f}'
+                if len(resp.baseline_electrical_energy) > k else '-')
+        rows.insert(3 + k, (f'electrical {mode} [J]', f'{resp.electrical_energy[k]:.1f}', base))
     saving = 100 * (1 - resp.energy / resp.baseline_energy) if resp.baseline_energy else 0
-    lines = [f'{r[0]:<20}{r[1]:>22}{r[2]:>22}' for r in rows]
-    lines += [f'saving vs trapezoid: {saving:.2f} %',
+    lines = [f'{r[0]:<28}{r[1]:>22}{r[2]:>22}' for r in rows]
+    lines += [f'saving vs trapezoid: {saving:.2f} % (mechanical)']
+    for k, mode in enumerate(resp.electrical_bus_modes):
+        if len(resp.baseline_electrical_energy) > k and resp.baseline_electrical_energy[k]:
+            ratio = resp.electrical_energy[k] / resp.baseline_electrical_energy[k]
+            lines.append(f'saving vs trapezoid, electrical {mode}: {100 * (1 - ratio):.2f} %')
+    if resp.electrical_bus_modes:
+        lines.append(f'objective energy model: {resp.energy_model or "mechanical"}; copper '
+                     f'{resp.copper_energy:.1f} J, standby {resp.standby_energy:.1f} J')
+    lines += [
               f'optimiser energy {resp.optimizer_energy:.2f} J, time-optimal duration '
               f'{resp.min_duration:.3f} s, solver {resp.solver_status}, '
               f'{resp.iterations} iterations, {1000 * resp.solve_time:.0f} ms',

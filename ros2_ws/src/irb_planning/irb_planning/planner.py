@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from irb_description.electrical import load_electrical
 from irb_description.friction import FrictionMap, FrictionMapError
 from irb_description.model import RobotModel, UnreachableError
 from irb_description.path import (CirclePath, JointPath, PathBase, check_joint_path,
@@ -40,7 +41,8 @@ from .problem import (casadi_friction, casadi_inverse_dynamics, effective_speed_
                       path_dynamics)
 from .profile import ThetaProfile
 from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVALID_REQUEST,
-                      ERROR_SOLVER, ERROR_UNREACHABLE, OBJECTIVE_ENERGY, OBJECTIVE_TIME,
+                      ERROR_SOLVER, ERROR_UNREACHABLE, ENERGY_MECHANICAL, ENERGY_MODELS,
+                      OBJECTIVE_ENERGY, OBJECTIVE_TIME,
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
                             SolveRequest, Transcription)
@@ -69,6 +71,8 @@ class PlannerSettings:
     max_trajectory_points: int = 20000   # message points at most
     adapt_rounds: int = 3                # re-solves with limits tightened by measured excess
     path_check_samples: int = 4096       # theta samples of the along-path check
+    electrical_smoothing_w: float = 0.5  # eps [W] of |.| in the electrical NLP objective
+    electrical_config: str = ''          # electrical-model YAML; '' = irb_description's
 
 
 @dataclass
@@ -81,7 +85,7 @@ class PlanResult:
     objective: str
     profile: ThetaProfile
     evaluation: Evaluation
-    optimizer_energy: float
+    optimizer_energy: float              # mechanical [J], the optimiser's own quadrature
     min_duration: float
     solve_time: float
     iterations: int
@@ -93,6 +97,7 @@ class PlanResult:
     notes: list[str] = field(default_factory=list)
     trajectory: dict | None = None       # the message's points: t, theta, q, qd, qdd, tau
     verification: Verification | None = None   # the independent check of that message
+    optimizer_electrical_energy: float = float('nan')  # [J], own quadrature, electrical
 
 
 class _Entry:
@@ -124,6 +129,9 @@ class Planner:
         self.map_dirs = [Path(d) for d in self.settings.friction_map_dirs] or default_map_dirs()
         k = self.model.kinematics
         lim = self.model.limits
+        self.electrical = load_electrical(
+            Path(self.settings.electrical_config) if self.settings.electrical_config
+            else None).axes(len(self.model.joint_names))
         self._kin = dict(a=k.dh_a, alpha=k.dh_alpha, d=k.dh_d, offset=k.dh_offset,
                          lower=lim.lower, upper=lim.upper)
 
@@ -178,7 +186,8 @@ class Planner:
                 self._checked_paths.popitem(last=False)
 
     def _entry(self, req: PlanRequest, path: PathBase, fm: FrictionMap) -> _Entry:
-        key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__())
+        key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__(),
+               req.energy_model)
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
@@ -201,8 +210,12 @@ class Planner:
         except UnreachableError as exc:
             raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
         friction = casadi_friction(fm, s.friction_smoothing_rad_s)
+        mode = ENERGY_MODELS[req.energy_model or ENERGY_MECHANICAL]
         tr = Transcription(nodes, mids, friction, req.boundary, s.abs_smoothing_j_rad,
-                           s.max_iterations, s.tolerance, s.warm_start, sides)
+                           s.max_iterations, s.tolerance, s.warm_start, sides,
+                           electrical=self.electrical if mode else None,
+                           bus_mode=mode or 'shared',
+                           electrical_smoothing=s.electrical_smoothing_w)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
@@ -390,7 +403,8 @@ class Planner:
         torque = self.torque(fm)
 
         def check(profile):
-            ev = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz)
+            ev = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz,
+                          self.electrical)
             return (ev, *self.trajectory(profile, req, path, fm, raw_map, checked))
         t_min, t_out = self.min_duration(entry, base, checked, check)
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
@@ -437,7 +451,7 @@ class Planner:
                             + '; '.join(evaluation.violations + verification.problems))
         baseline = evaluation if req.objective == OBJECTIVE_TRAPEZOID else evaluate(
             trapezoid_profile(evaluation.duration, s.trapezoid_ramp_fraction), sample,
-            torque, checked, s.evaluation_rate_hz)
+            torque, checked, s.evaluation_rate_hz, self.electrical)
         if baseline.violations:
             notes.append('trapezoid baseline violates limits: ' + baseline.violations[0])
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
@@ -450,7 +464,10 @@ class Planner:
             iterations=stats.iterations if stats else 0,
             status=stats.status if stats else 'closed form', baseline=baseline,
             joint_names=list(self.model.joint_names), request=req, fourier_coeffs=coeffs,
-            notes=notes, trajectory=trajectory, verification=verification)
+            notes=notes, trajectory=trajectory, verification=verification,
+            optimizer_electrical_energy=float(getattr(res, 'electrical_energy', float('nan'))
+                                              if req.objective != OBJECTIVE_TRAPEZOID
+                                              else float('nan')))
 
     def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: PathBase,
                    fm: FrictionMap, raw_map: dict, checked: LimitSet
@@ -484,7 +501,8 @@ class Planner:
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
                               req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
-                              path_tolerance_m=s.path_tolerance_m)
+                              path_tolerance_m=s.path_tolerance_m,
+                              electrical=self.electrical)
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
@@ -506,7 +524,7 @@ class Planner:
         req = result.request
         fm, _ = self.friction_map(req.friction_map)
         return evaluate(result.profile, self.sample_path(request_path(req)), self.torque(fm),
-                        self._limits(req, fm)[1], rate_hz)
+                        self._limits(req, fm)[1], rate_hz, self.electrical)
 
     def node_samples(self, result: PlanResult) -> dict:
         """The plan's trajectory message points (checked): t (K,) [s]; q, qd, qdd, tau (K, n)."""

@@ -55,6 +55,10 @@ PARAMETERS = {
                      'check measured [-]'),
     'path_check_samples': ('path_check_samples', 'theta samples of the along-path joint check '
                            '[-]'),
+    'electrical_smoothing_w': ('electrical_smoothing_w', 'eps of the smoothed |.| in the '
+                               'electrical NLP objective [W]'),
+    'electrical_config': ('electrical_config', "electrical-model YAML ('' = irb_description "
+                          "config/electrical.yaml) [-]"),
 }
 #: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
 MAP_DIRS = 'friction_map_dirs'

@@ -26,6 +26,12 @@ OBJECTIVE_TRAPEZOID = 'trapezoid'
 OBJECTIVE_FOURIER = 'fourier'
 OBJECTIVES = (OBJECTIVE_ENERGY, OBJECTIVE_TIME, OBJECTIVE_TRAPEZOID, OBJECTIVE_FOURIER)
 
+#: what the energy objective minimises: the thesis's mechanical int sum |tau qd| dt, or the
+#: electrical energy from the grid (irb_description.electrical) with the given DC-bus mode
+ENERGY_MECHANICAL = 'mechanical'
+ENERGY_MODELS = {ENERGY_MECHANICAL: None, 'electrical_none': 'none',
+                 'electrical_shared': 'shared', 'electrical_regenerative': 'regenerative'}
+
 PATH_CIRCLE = 'circle'
 PATH_ARC = 'arc'
 PATH_LINE = 'line'
@@ -87,6 +93,7 @@ class PlanRequest:
     waypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     blend_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
     closed: bool = False
+    energy_model: str = ''               # one of ENERGY_MODELS; '' = mechanical
 
     @property
     def path_key(self) -> tuple:
@@ -191,6 +198,11 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
     scaling = req.limit_scaling or 1.0
     if not MIN_LIMIT_SCALING <= scaling <= 1:
         bad(f'limit_scaling must be in [{MIN_LIMIT_SCALING:g}, 1], got {req.limit_scaling}')
+    energy_model = req.energy_model or ENERGY_MECHANICAL
+    if energy_model not in ENERGY_MODELS:
+        bad(f'unknown energy_model {req.energy_model!r}; one of {list(ENERGY_MODELS)}')
+    if energy_model != ENERGY_MECHANICAL and req.objective == OBJECTIVE_FOURIER:
+        bad('the Fourier profile minimises mechanical energy only')
     boundary = req.boundary or BOUNDARY_REST
     if req.objective == OBJECTIVE_FOURIER:
         if req.boundary and req.boundary != BOUNDARY_PERIODIC:
@@ -212,4 +224,4 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
                    boundary=boundary, normal=np.asarray(req.normal, float),
                    sweep=float(req.sweep), waypoints=np.asarray(req.waypoints, float),
                    blend_radii=np.atleast_1d(np.asarray(req.blend_radii, float)),
-                   closed=bool(req.closed))
+                   closed=bool(req.closed), energy_model=energy_model)

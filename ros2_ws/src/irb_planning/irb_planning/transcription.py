@@ -29,7 +29,15 @@ if ``abs_smoothing`` eps > 0, sqrt(y^2 + eps^2), whose bias is at most 2 pi n ep
 energy reported is always recomputed with the exact |y|. The result is a quadratic
 ``ThetaProfile`` (node accelerations included), sampled exactly by the evaluator.
 
-The NLP is built once per (path, grid, boundary, friction); duration, weights, delta and the
+Electrical objective (``electrical`` = an irb_description ElectricalModel of the n axes, and a
+DC-bus mode): E_el = sum_k over the two halves of interval k of dt_half (P(a) + P(b)) / 2,
+the trapezoidal rule in time of the total electrical power P (standby included) at the nodes
+and midpoints, dt_half from the same time law as T (finite at rest ends, where the copper
+losses of holding are paid). P is the model's CasADi form with ``electrical_smoothing`` eps
+[W] for IPOPT; the reported electrical energy uses eps = 0. The mechanical epigraph stays in
+the objective with weight 1e-6 so that its variables remain determined.
+
+The NLP is built once per (path, grid, boundary, friction, energy model); duration, weights, delta and the
 limits are parameters or bounds, so a new request only re-solves (warm-started from the last
 solution). No ROS imports.
 """
@@ -81,6 +89,7 @@ class TranscriptionResult:
     duration: float
     peak_torque: np.ndarray
     stats: SolveStats
+    electrical_energy: float = float('nan')   # [J], own quadrature, electrical model only
 
 
 class Transcription:
@@ -89,7 +98,8 @@ class Transcription:
     def __init__(self, nodes: PathDynamics, mids: PathDynamics, friction: Callable,
                  boundary: str = BOUNDARY_REST, abs_smoothing: float = 0.0,
                  max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True,
-                 sides: tuple | None = None):
+                 sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
+                 electrical_smoothing: float = 0.5):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides."""
@@ -174,7 +184,23 @@ class Transcription:
             energy = ca.dot(W, e_pos + e_neg)
         else:
             energy = ca.dot(W, ca.sqrt(y ** 2 + self.abs_smoothing ** 2))
-        f = p[0] * energy + p[1] * duration
+        self.electrical, self.bus_mode = electrical, bus_mode
+        if electrical is not None:
+            qd_n = ca.DM(nodes.dq.T) * rep(sb)
+            qd_m = ca.DM(mids.dq.T) * rep(safe_sqrt(b_mid))
+            pieces = [2 * D / J / (pts[j] + pts[j + 1]) for j in range(J)]
+            dt1, dt2 = sum(pieces[:J // 2]), sum(pieces[J // 2:])   # the halves of each k
+
+            def el_energy(eps):
+                pn = ca.transpose(electrical.casadi_power(tau_n, qd_n, bus_mode, eps))
+                pm = ca.transpose(electrical.casadi_power(tau_m, qd_m, bus_mode, eps))
+                return ca.sum1(dt1 * (pn[:-1] + pm) / 2 + dt2 * (pm + pn[1:]) / 2)
+            el_exact = el_energy(0.0)
+            f = p[0] * (el_energy(float(electrical_smoothing)) + 1e-6 * energy) \
+                + p[1] * duration
+        else:
+            el_exact = ca.SX(float('nan'))
+            f = p[0] * energy + p[1] * duration
 
         # --- path constraints (rows; bounds are set per solve) ---------------------------
         collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * D     # = 0 (b' = 2 a, exact)
@@ -206,7 +232,7 @@ class Transcription:
         self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
         self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
-                                             ca.vec(tau_m), y])
+                                             ca.vec(tau_m), y, el_exact])
         self._ba = ca.Function('ba', [x], [b, a])
         self.build_time = time.perf_counter() - t0
 
@@ -336,7 +362,8 @@ class Transcription:
             if ok:
                 self._last = (x, np.asarray(sol['lam_x']).ravel(),
                               np.asarray(sol['lam_g']).ravel(), req)
-        energy, duration, tau_n, tau_m, _ = (np.asarray(v).ravel() for v in self._aux(x))
+        energy, duration, tau_n, tau_m, _, e_el = (np.asarray(v).ravel()
+                                                   for v in self._aux(x))
         b, a = (np.asarray(v).ravel() for v in self._ba(x))
         b = np.maximum(b, 0.0)
         if self.boundary == BOUNDARY_REST:
@@ -351,4 +378,4 @@ class Transcription:
             except ValueError as exc:
                 stats_out = SolveStats(f'invalid profile: {exc}', False, int(iters), elapsed)
         return TranscriptionResult(profile, float(energy[0]), float(duration[0]), peak,
-                                   stats_out)
+                                   stats_out, float(e_el[0]))

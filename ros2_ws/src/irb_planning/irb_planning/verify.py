@@ -20,7 +20,8 @@ profile's time law:
 * **limits** along the played trajectory: positions, speeds, torques = rigid body (the given
   function, pinocchio RNEA on the URDF in the planner) + friction evaluated from the map's
   numbers here;
-* **energy** of the played trajectory, int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9).
+* **energy** of the played trajectory, int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9), and
+  its electrical energy for every DC-bus mode when an ElectricalModel is given.
 """
 from __future__ import annotations
 
@@ -189,7 +190,8 @@ class MapFriction:
 class Verification:
     """Outcome: ok, problems (one line each); max_path_deviation [m] of the played TCP;
     max_time_error [-] relative, per segment; energy [J], duration [s], peak torque/speed
-    (n,) of the played trajectory; the played samples t, q, qd, qdd, tau."""
+    (n,) of the played trajectory; the played samples t, q, qd, qdd, tau; electrical: the
+    played trajectory's ElectricalModel.breakdown [J] (empty without a model)."""
 
     problems: list[str]
     max_path_deviation: float
@@ -203,6 +205,7 @@ class Verification:
     qd: np.ndarray = field(repr=False, default=None)
     qdd: np.ndarray = field(repr=False, default=None)
     tau: np.ndarray = field(repr=False, default=None)
+    electrical: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -287,7 +290,8 @@ def quintic(t0, t1, p0, p1, rate: float, min_samples: int):
 def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKinematics,
                 rigid_torque: Callable, friction: Callable, rest: bool,
                 rate_hz: float = 1000.0, min_samples_per_segment: int = 8,
-                path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6) -> Verification:
+                path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6,
+                electrical=None) -> Verification:
     """Check a plan's trajectory message as played (see module docstring).
 
     t (K,) [s]; q, qd, qdd (K, n); profile = (theta, theta_dot, theta_ddot, quadratic): node
@@ -367,5 +371,6 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
     if not np.all(np.isfinite(tau)):
         problems.append('non-finite torque')
     energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
+    elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
     return Verification(problems, float(dev.max()), float(worst_time), energy,
-                        float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau)
+                        float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec)
