@@ -674,17 +674,23 @@ def check_joint_path(model: RobotModel, path: PathBase, samples: int = 4096,
                    else '') + ')')
 
 
-def load_path_file(name) -> PathBase:
-    """A path from a YAML file holding a ``path_from_spec`` mapping; ValueError with one line
-    saying why not (missing file, not YAML, not a valid path)."""
+def read_path_spec(name):
+    """The mapping a YAML path file holds (not checked as a path yet); ValueError with one line
+    saying why not (missing file, not YAML)."""
     import yaml
     try:
         with open(name) as f:
-            spec = yaml.safe_load(f)
+            return yaml.safe_load(f)
     except OSError as exc:
         raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
     except yaml.YAMLError as exc:
         raise ValueError(f'path file {name} is not YAML: {str(exc).splitlines()[0]}') from None
+
+
+def load_path_file(name) -> PathBase:
+    """A path from a YAML file holding a ``path_from_spec`` mapping; ValueError with one line
+    saying why not (missing file, not YAML, not a valid path)."""
+    spec = read_path_spec(name)
     try:
         return path_from_spec(spec)
     except ValueError as exc:

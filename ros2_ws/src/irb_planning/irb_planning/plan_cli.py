@@ -64,14 +64,8 @@ def parse_args(argv):
 
 def read_path_file(name: str) -> PathSpec:
     """PathSpec from a YAML path file; ValueError with one line saying why not."""
-    import yaml
-    try:
-        with open(name) as f:
-            spec = yaml.safe_load(f)
-    except OSError as exc:
-        raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f'path file {name} is not YAML: {str(exc).splitlines()[0]}') from None
+    from irb_description.path import read_path_spec
+    spec = read_path_spec(name)
     try:
         return path_msg_from_spec(spec)
     except (ValueError, TypeError, IndexError) as exc:
