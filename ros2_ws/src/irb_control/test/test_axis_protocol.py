@@ -131,11 +131,14 @@ def test_link_loss_and_recovery_are_reported_once():
     assert event == 'recovered' and b.stats.link_losses == 1
 
 
+def latched(seq):
+    """A STATE datagram reporting a latched ERR_COMM_TIMEOUT."""
+    s = state(seq)
+    s.error = 1
+    return encode_state(s)
+
+
 def test_reset_is_repeated_until_the_axis_computer_reports_no_error():
-    def latched(seq):
-        s = state(seq)
-        s.error = 1
-        return encode_state(s)
     b = BridgeCore()
     b.on_datagram(latched(1), 0.0)
     assert not decode_command(b.on_command(np.zeros(6), 0.001)).reset   # not requested yet
@@ -150,10 +153,6 @@ def test_reset_is_repeated_until_the_axis_computer_reports_no_error():
 def test_a_reset_reaches_the_axis_computer_while_the_controller_is_silent():
     # after a fault pdplus is stopped and sends nothing: the reset must not wait for its
     # commands (the soak on the axis path stayed latched for minutes, enable refused)
-    def latched(seq):
-        s = state(seq)
-        s.error = 1
-        return encode_state(s)
     b = BridgeCore()
     b.on_datagram(latched(1), 0.0)
     assert b.reset_command(0.001) is None                      # not requested

@@ -38,6 +38,16 @@ def engaged(plant, **kw):
     return core
 
 
+def timed_out(plant):
+    """An engaged core after 3 cycles without a command: ERR_COMM_TIMEOUT latched."""
+    core = engaged(plant, miss_limit=3)
+    for _ in range(3):
+        core.begin_cycle()
+        core.end_cycle()
+    assert core.error == ERR_COMM_TIMEOUT
+    return core
+
+
 def hold_torque(plant):
     return plant.model.gravity(plant.state.q)
 
@@ -82,11 +92,7 @@ def test_misses_engage_brakes_and_latch_until_reset(plant):
 
 def test_a_reset_only_command_clears_the_error_and_stays_on_the_brakes(plant):
     # what the bridge sends for ~/reset while the controller is stopped: idle, zero, reset
-    core = engaged(plant, miss_limit=3)
-    for _ in range(3):
-        core.begin_cycle()
-        core.end_cycle()
-    assert core.error == ERR_COMM_TIMEOUT
+    core = timed_out(plant)
     core.begin_cycle()
     core.on_datagram(command(core.seq, reset=True, mode=MODE_IDLE), CONTROLLER)
     core.end_cycle()
@@ -195,11 +201,7 @@ def test_idle_request_leaves_external_control_without_an_error(plant):
 
 def test_only_the_bound_controller_is_heard_and_may_reset(plant):
     # defect 7: any sender could reset a latched error
-    core = engaged(plant, miss_limit=3)
-    for _ in range(3):
-        core.begin_cycle()
-        core.end_cycle()
-    assert core.error == ERR_COMM_TIMEOUT
+    core = timed_out(plant)
     core.begin_cycle()
     assert not core.on_datagram(command(core.seq, reset=True), ('127.0.0.1', 9999))
     assert not core.on_datagram(command(core.seq, reset=True, session=1), CONTROLLER)
