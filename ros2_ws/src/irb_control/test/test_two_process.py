@@ -40,8 +40,10 @@ def _stop(proc):
 def processes():
     ns = f'/tp{uuid.uuid4().hex[:8]}'
     common = ['--ros-args', '-r', f'__ns:={ns}']
+    # lockstep_wait_s: wall time per command before a silent pdplus counts as a miss; 50 ms
+    # latched "no command for 16 ms" in a fresh-clone CI run on a jittery 2-vCPU VM
     sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
-                            '-p', 'mode:=lockstep'],
+                            '-p', 'mode:=lockstep', '-p', 'lockstep_wait_s:=0.5'],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
@@ -133,7 +135,10 @@ def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state():
     from std_srvs.srv import Trigger
     ns = f'/st{uuid.uuid4().hex[:8]}'
     common = ['--ros-args', '-r', f'__ns:={ns}']
-    sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common],
+    # the subject is pdplus's own stall detection (its limits unchanged); the simulator's
+    # command timeout is 10 cycles so that platform jitter before the freeze does not latch it
+    sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
+                            '-p', 'command_timeout_s:=0.04032'],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
