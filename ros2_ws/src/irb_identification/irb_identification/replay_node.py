@@ -111,6 +111,14 @@ class ReplayNode(Node):
                and any(p.get_subscription_count() < self.wait_subs
                        for p in self.pubs.values())):
             self.stop.wait(0.02)
+        short = {t: p.get_subscription_count() for t, p in self.pubs.items()
+                 if p.get_subscription_count() < self.wait_subs}
+        if self.wait_subs > 0 and short and not self.stop.is_set():
+            self.get_logger().warning(
+                f'playing anyway after wait_timeout_s = {self.wait_timeout:g} s: '
+                + ', '.join(f'{t} has {n} of {self.wait_subs} subscriber(s)'
+                            for t, n in short.items())
+                + ' (what they miss is lost for them)')
 
     def flush(self) -> None:
         """Wait (up to drain_timeout_s) until reliable subscribers acknowledged every message

@@ -58,7 +58,9 @@ def named(report):
 @pytest.mark.parametrize('pair', [('stribeck', 'torque_offset'),
                                   ('joint_elasticity', 'viscous_temperature_drift'),
                                   ('backlash', 'stribeck'),
-                                  ('torque_offset', 'time_delay')])
+                                  ('torque_offset', 'time_delay'),
+                                  # was named as one asymmetry of the summed size
+                                  ('torque_offset', 'coulomb_asymmetry')])
 def test_pairs_are_both_named_with_shares(model, plant_map, plant_yaml, tmp_path, pair):
     _, bags = simulate(model, plant_map, tmp_path / 'bags', pair)
     r = run_workflow(bags, plant_yaml, CONFIG, model=model).report
@@ -372,6 +374,45 @@ def test_indistinguishable_candidates_are_aliases_not_a_split(rng):
     assert step.aliases == [other]
     n = sum(step.wins.values())
     assert step.support == (step.wins.get('b', 0) + step.wins.get('b_alias', 0)) / n >= 0.6
+
+
+def test_split_bootstrap_is_answered_ambiguous_not_named(rng):
+    """Two candidates that explain the data equally well by construction (the data, the
+    noise and the fit/hold-out blocks are symmetric under time reversal, which swaps them),
+    correlated 0.34, so not aliases (each explains something once the other is in): the
+    bootstrap splits between them, so nothing is named; the answer is `ambiguous` with the
+    split, and its sentence says so."""
+    from irb_identification.discrepancy_core.report import answer_line
+    from irb_identification.discrepancy_core.workflow import verdict
+    n = 3100                                    # 31 blocks: reversal keeps their parity
+    t = np.arange(n)
+    xb = np.sin(t / 40.0) * (0.2 + t / n)
+    xc = xb[::-1].copy()
+    e = 0.3 * rng.standard_normal(n)
+    y = 0.5 * (xb + xc) + (e + e[::-1]) / np.sqrt(2)
+    cb = ('torque', 1)
+    B = Blocks({cb: t}, {cb: y}, {cb: t // 100}, {cb: 0.3})
+    tbs = np.unique(B.tb[cb])
+
+    def cands(e, fitrow, selected):
+        out = [_term('b', cb, xb), _term('c', cb, xc)]
+        return [t_ for t_ in out if t_.key() not in selected]
+    fr = forward_select(B, B.y, tbs[tbs % 2 == 0], tbs[tbs % 2 == 1], cands,
+                        lambda t_, v: ({}, []), Decision(n_boot=200))
+    last = fr.steps[-1]
+    assert fr.selected == [] and last.aliases == [], last.stop_reason
+    assert 'bootstrap support' in last.stop_reason
+    effect, confidence, amb = verdict([], last, True, 200)
+    assert effect == 'ambiguous' and confidence == amb['support'] < 0.6
+    assert amb['best'] in ('b', 'c') and set(amb['wins']) <= {'b', 'c', 'none'}
+    assert amb['wins'].get('b', 0) >= 0.2 and amb['wins'].get('c', 0) >= 0.2, amb
+    line = answer_line({'effects': [], 'effect': effect, 'confidence': confidence,
+                        'ambiguous': amb, 'unexplained': None,
+                        'decision': {'min_confidence': 0.6}})
+    assert line.startswith('AMBIGUOUS: the bootstrap splits') and 'nothing named' in line
+    # the same step with a name: that name wins over the split
+    named = [{'effect': 'b', 'kind': 'effect', 'confidence': 0.9}]
+    assert verdict(named, last, True, 200)[:2] == ('b', 0.9)
 
 
 def test_cogging_period_is_kept_below_half_the_stroke(model, plant_map, rng):

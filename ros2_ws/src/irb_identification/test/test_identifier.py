@@ -239,9 +239,12 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
         _read_until(ident, 'waiting for publishers', 60)
         replay = subprocess.run(
             ['ros2', 'run', 'irb_identification', 'replay', '--ros-args', '-p', f'bag:={bag}',
-             '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'reliable:=true'],
-            capture_output=True, text=True, env=env, timeout=180)
+             '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'wait_timeout_s:=120.0',
+             '-p', 'reliable:=true'],
+            capture_output=True, text=True, env=env, timeout=240)
         assert replay.returncode == 0, replay.stderr
+        # the replay played to our subscriber, not into the void after its wait ran out
+        assert 'playing anyway' not in replay.stderr, replay.stderr
         lines = _read_until(ident, 'wrote', 120)
         assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
     finally:

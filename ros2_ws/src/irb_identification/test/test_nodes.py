@@ -190,6 +190,24 @@ def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
     assert s.messages == len(run.t)
     assert s.wall_s == pytest.approx(s.bag_span_s / 2, abs=0.1)
     player.destroy_node()
+    # asked to wait for a subscriber nobody provides: plays after the bound and says so
+    player = ReplayNode(context=context, parameter_overrides=params(
+        bag=str(bag), rate=0.0, start_delay_s=0.0, wait_for_subscribers=1,
+        wait_timeout_s=0.3, topics=['/joint_states']))
+    said = []
+
+    class Log:
+        def info(self, m):
+            pass
+
+        def warning(self, m):
+            said.append(m)
+    player.get_logger = Log
+    player.run()
+    assert player.stats.messages == len(run.t)
+    assert any('playing anyway after wait_timeout_s = 0.3 s: /joint_states has 0 of 1'
+               in m for m in said), said
+    player.destroy_node()
     with pytest.raises(bagio.BagError, match='not recorded'):
         ReplayNode(context=context, parameter_overrides=params(bag=str(bag),
                                                                topics=['/nope']))

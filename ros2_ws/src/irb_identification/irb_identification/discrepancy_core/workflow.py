@@ -331,6 +331,28 @@ def _cb_name(cb) -> str:
     return f'{cb[0]}_joint_{cb[1] + 1}' if cb[1] is not None else cb[0]
 
 
+def verdict(named: list[dict], last, residual_above_floor: bool,
+            n_boot: int) -> tuple[str, float, dict | None]:
+    """The answer from the named effects and the last selection step: the names joined
+    ('+'), else 'ambiguous' when the last step stopped on bootstrap support (replicates split
+    between candidates that are not aliases), else 'unexplained' (residual above the floor)
+    or 'none'. Returns (effect, confidence, ambiguous details or None)."""
+    n_boot = max(n_boot, 1)
+    ambiguous = None
+    if last is not None and last.added is None and last.best is not None and \
+            last.stop_reason.startswith(f'{last.best}: bootstrap support'):
+        ambiguous = {'best': last.best, 'aliases': last.aliases, 'support': last.support,
+                     'wins': {k: v / n_boot for k, v in last.wins.items()}}
+    if named:
+        effect = '+'.join(n['effect'] if n['kind'] != 'refit' else f"refit:{n['effect']}"
+                          for n in named)
+        return effect, min(n['confidence'] for n in named), ambiguous
+    if ambiguous:
+        return 'ambiguous', ambiguous['support'], ambiguous
+    none_frac = (last.wins.get('none', 0) / n_boot) if last else 1.0
+    return ('unexplained' if residual_above_floor else 'none'), float(none_frac), None
+
+
 def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
                  holdout_bags=(), model=None, log=None, runs=None) -> WorkflowResult:
     """Analyse ``bags`` (+ ``holdout_bags``) against the model file; see module docstring.
@@ -598,22 +620,7 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
                           config.unexplained_ratio)
     above = {k: v for k, v in loc.items() if v['above']}
     last = fr.steps[-1] if fr.steps else None
-    n_boot = max(config.n_boot, 1)
-    ambiguous = None
-    if last is not None and last.added is None and last.best is not None and \
-            last.stop_reason.startswith(f'{last.best}: bootstrap support'):
-        ambiguous = {'best': last.best, 'aliases': last.aliases, 'support': last.support,
-                     'wins': {k: v / n_boot for k, v in last.wins.items()}}
-    if named:
-        effect = '+'.join(n['effect'] if n['kind'] != 'refit' else f"refit:{n['effect']}"
-                          for n in named)
-        confidence = min(n['confidence'] for n in named)
-    elif ambiguous:
-        effect, confidence = 'ambiguous', ambiguous['support']
-    else:
-        none_frac = (last.wins.get('none', 0) / n_boot) if last else 1.0
-        effect = 'unexplained' if above else 'none'
-        confidence = float(none_frac)
+    effect, confidence, ambiguous = verdict(named, last, bool(above), config.n_boot)
     unexplained = None
     if above:
         unexplained = {
