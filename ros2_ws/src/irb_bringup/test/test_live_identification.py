@@ -9,7 +9,7 @@ import pytest
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-SPEEDS = [0.05, 0.1, 0.2, 0.4, 0.8, 1.2]
+SPEEDS = [0.02, 0.035, 0.06, 0.1, 0.2, 0.4, 0.8, 1.2]   # [rad/s], two below v_s = 0.04
 
 
 def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
@@ -35,7 +35,7 @@ def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
         ProcessSpec('experiments', ros2_run_cmd('irb_identification', 'experiments', params={
             'mode': 'ros', 'use_sim_time': True, 'root': str(tmp_path / 'bags'),
             'prefix': 'live', 'joints': "['joint_3']", 'speeds_rad_s': str(SPEEDS),
-            'hold_max_s': 1.0, 'hold_min_s': 1.0}), required=False),
+            'hold_max_s': 2.5, 'hold_min_s': 2.5}), required=False),
     ]
     lines = []
 
@@ -66,8 +66,9 @@ def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
         assert res.success, res.message + tail
         assert res.message == str(fmap)
     finally:
-        group.stop()
+        codes = group.stop()
         context.try_shutdown()
+    assert codes['identifier'] == 0, ''.join(map(str, lines))[-3000:]   # Ctrl-C: clean exit
     rep = json.loads(report.read_text())
     # the live stream: everything the plant published while the identifier listened,
     # holds and moves between runs included; one run per speed found in it
@@ -81,9 +82,9 @@ def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
         os.path.join(get_package_share_directory('irb_control'), 'config', 'plant.yaml')))
     v = np.array(SPEEDS)
     err = np.abs(got.torque(v) - plant.torque(v))
-    # the plant's friction torque at the swept speeds (11.5 .. 28 N m) within 1 %: the
-    # replayed-bag pipeline of the main job lands within 0.01 %, so 1 % leaves room for the
-    # live stream's different message timing, not for a wrong model
-    assert np.all(err < 0.01 * plant.torque(v)), (err, got, plant)
+    # the plant's friction torque at the swept speeds (11.5 .. 28 N m) within 0.5 % (seen:
+    # <= 0.004 N m, 0.03 %). Without the speeds below the plant's Stribeck velocity
+    # (0.04 rad/s) the fit has no hump to find and Coulomb absorbs it: +0.5 N m at 0.05 rad/s
+    assert np.all(err < 0.005 * plant.torque(v)), (err, got, plant)
     assert got.coulomb == pytest.approx(plant.coulomb, rel=0.02)
     assert got.viscous == pytest.approx(plant.viscous, rel=0.02)

@@ -234,9 +234,11 @@ def bench_plans(window_s: float = 20.0) -> dict:
 
 
 # --- soak -------------------------------------------------------------------------------------
-def bench_soak(minutes: float, path: str, load: bool, rt: int = 0) -> dict:
+def bench_soak(minutes: float, path: str, load: bool, rt: int = 0,
+               latency_us: int = -1) -> dict:
     g = Graph('soak')
-    rtp = (f'realtime_priority:={rt}',) if rt else ()
+    rtp = ((f'realtime_priority:={rt}',) if rt else ()) + (
+        (f'cpu_dma_latency_us:={latency_us}',) if latency_us >= 0 else ())
     loader = None
     if load:
         loader = subprocess.Popen([sys.executable, '-c', 'while True: pass'],
@@ -295,7 +297,8 @@ def bench_soak(minutes: float, path: str, load: bool, rt: int = 0) -> dict:
             reasons[key] = reasons.get(key, 0) + 1
         out = {'benchmark': f'soak: {path} path + pdplus + recorder, enabled again after '
                             'every motion', 'minutes': minutes, 'path': path,
-               'cpu_load_process': load, 'realtime_priority': rt, 'motions': motions,
+               'cpu_load_process': load, 'realtime_priority': rt,
+               'cpu_dma_latency_us': latency_us, 'motions': motions,
                'stops': len(stops),
                'stops_per_hour': len(stops) / hours if hours else None,
                'stops_by_reason': reasons, 'stop_list': stops[:50],
@@ -310,7 +313,8 @@ def bench_soak(minutes: float, path: str, load: bool, rt: int = 0) -> dict:
             # process is a gap the watchdog sees), late commands it ignored
             out['simulator'] = json.loads(sim_stats.read_text())
         subprocess.run(['rm', '-rf', str(bagroot)])
-    return _write(f'soak_{path}{"_loaded" if load else ""}{f"_rt{rt}" if rt else ""}', out)
+    return _write(f'soak_{path}{"_loaded" if load else ""}{f"_rt{rt}" if rt else ""}'
+                  f'{f"_lat{latency_us}" if latency_us >= 0 else ""}', out)
 
 
 def main() -> None:
@@ -324,11 +328,14 @@ def main() -> None:
     s.add_argument('--load', action='store_true', help='keep one core busy meanwhile')
     s.add_argument('--realtime-priority', type=int, default=0,
                    help='SCHED_FIFO priority for the loop nodes (0 = normal scheduling)')
+    s.add_argument('--cpu-dma-latency-us', type=int, default=-1,
+                   help='the loop nodes\' cpu_dma_latency_us (-1 = leave alone, 0 = no deep '
+                        'idle)')
     a = ap.parse_args()
     if a.what == 'plans':
         bench_plans(a.window_s)
     else:
-        bench_soak(a.minutes, a.path, a.load, a.realtime_priority)
+        bench_soak(a.minutes, a.path, a.load, a.realtime_priority, a.cpu_dma_latency_us)
 
 
 if __name__ == '__main__':

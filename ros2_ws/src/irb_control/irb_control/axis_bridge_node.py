@@ -52,7 +52,7 @@ class AxisBridge(Node):
                           'after a jump) before the bridge follows it [-]')
         self.executor_kind = declare(self, 'executor', 'events',
                                      "'events' (rclpy EventsExecutor, faster) or 'single'")
-        self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
+        self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
         self.core = BridgeCore(link_timeout, max_age, window, confirm)
         self.peer = (self.axis_address, self.command_port)
         self.joint_names = RobotModel.load().joint_names

@@ -12,21 +12,50 @@ from rclpy.parameter import Parameter
 from irb_description.node_main import declare, spin_until_signal
 
 
-def declare_realtime(node: Node) -> tuple[int, list[int]]:
-    """Declare ``realtime_priority`` and ``cpu_affinity`` (the same on every loop node) and
-    return their values; ValueError for a priority outside 0-99 or a negative CPU."""
+def declare_realtime(node: Node) -> tuple[int, list[int], int]:
+    """Declare ``realtime_priority``, ``cpu_affinity`` and ``cpu_dma_latency_us`` (the same
+    on every loop node) and return their values; ValueError for a priority outside 0-99, a
+    negative CPU or a latency below -1."""
     prio = declare(node, 'realtime_priority', 0,
                    'SCHED_FIFO priority 1-99 of the process threads (executor and DDS); 0 = '
                    'normal scheduling. Needs CAP_SYS_NICE or an rtprio limit; a warning, not '
                    'an error, when refused')
     cpus = declare(node, 'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
                    'CPUs the process threads may run on; [] = all') or []
+    lat = int(declare(node, 'cpu_dma_latency_us', -1,
+                      '[us] while the node runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) '
+                      'to keep the CPUs out of idle states slower to leave than this; 0 = no '
+                      'deep idle (idle CPUs poll: lowest wake-up latency, more power); -1 = '
+                      'leave alone. Needs write access to /dev/cpu_dma_latency; a warning, '
+                      'not an error, when refused'))
     prio, cpus = int(prio), [int(c) for c in cpus]
     if not 0 <= prio <= 99:
         raise ValueError(f'realtime_priority must be 0 (off) or 1-99, not {prio}')
     if any(c < 0 for c in cpus):
         raise ValueError(f'cpu_affinity: CPU numbers are >= 0, got {cpus}')
-    return prio, cpus
+    if lat < -1:
+        raise ValueError(f'cpu_dma_latency_us must be -1 (leave alone) or >= 0, not {lat}')
+    return prio, cpus, lat
+
+
+_LATENCY_REQUESTS = []     # open /dev/cpu_dma_latency files: the request lasts while open
+
+
+def hold_cpu_latency(us: int, path: str = '/dev/cpu_dma_latency') -> str:
+    """Ask the kernel's PM QoS to keep CPU wake-up latency <= ``us`` microseconds for as long
+    as this process lives (the file stays open; closing it, or the process ending, drops the
+    request). On a VM or a laptop an idle CPU otherwise sleeps in a halt state it takes
+    milliseconds to leave: measured on the 2-core CI VM with the bare rclpy echo
+    (benchmarks/echo_floor.py), round trip p99 1.5 -> 0.8 ms and max 11.8 -> 4.9 ms.
+    Returns '' when done, else the reason it was refused (never raises)."""
+    import struct
+    try:
+        f = open(path, 'wb', buffering=0)
+        f.write(struct.pack('i', int(us)))
+    except OSError as exc:
+        return str(exc)
+    _LATENCY_REQUESTS.append(f)
+    return ''
 
 
 def process_threads() -> list[int]:
@@ -37,7 +66,8 @@ def process_threads() -> list[int]:
         return [threading.get_native_id()]
 
 
-def apply_realtime(priority: int, cpus=(), logger=None, threads=None) -> dict:
+def apply_realtime(priority: int, cpus=(), logger=None, threads=None,
+                   cpu_latency_us: int = -1) -> dict:
     """SCHED_FIFO ``priority`` (1-99; 0 = leave the scheduling alone) and CPU affinity
     ``cpus`` ([] = leave alone) for ``threads`` (default: every thread of the process now:
     the executor thread and the middleware's receive threads, which are on the
@@ -48,7 +78,7 @@ def apply_realtime(priority: int, cpus=(), logger=None, threads=None) -> dict:
     or 0, 'cpus': applied CPU list or [], 'warnings': [...]}.
     """
     threads = process_threads() if threads is None else list(threads)
-    out = {'priority': 0, 'cpus': [], 'warnings': []}
+    out = {'priority': 0, 'cpus': [], 'cpu_dma_latency_us': -1, 'warnings': []}
 
     def warn(text):
         out['warnings'].append(text)
@@ -78,9 +108,19 @@ def apply_realtime(priority: int, cpus=(), logger=None, threads=None) -> dict:
             warn(f'realtime_priority {priority} (SCHED_FIFO) not permitted here ({exc}); '
                  f'running with normal scheduling. Grant CAP_SYS_NICE or an rtprio limit '
                  f'(ulimit -r / limits.conf), or set realtime_priority to 0')
-    if logger is not None and (out['priority'] or out['cpus']):
+    if cpu_latency_us >= 0:
+        why = hold_cpu_latency(cpu_latency_us)
+        if why:
+            warn(f'cpu_dma_latency_us {cpu_latency_us} not applied ({why}); idle CPUs may '
+                 f'take milliseconds to wake up. Needs write access to /dev/cpu_dma_latency')
+        else:
+            out['cpu_dma_latency_us'] = int(cpu_latency_us)
+    if logger is not None and (out['priority'] or out['cpus']
+                               or out['cpu_dma_latency_us'] >= 0):
         logger.info(f"realtime: {len(threads)} threads, SCHED_FIFO priority "
-                    f"{out['priority'] or 'off'}, CPUs {out['cpus'] or 'all'}")
+                    f"{out['priority'] or 'off'}, CPUs {out['cpus'] or 'all'}, CPU wake-up "
+                    f"latency " + (f"<= {out['cpu_dma_latency_us']} us"
+                                   if out['cpu_dma_latency_us'] >= 0 else 'not set'))
     return out
 
 
@@ -95,13 +135,14 @@ def make_executor(kind: str, context=None):
     return SingleThreadedExecutor(context=context)
 
 
-def spin_with(executor_kind: str, realtime: tuple[int, list[int]] = (0, [])):
+def spin_with(executor_kind: str, realtime: tuple[int, list[int], int] = (0, [], -1)):
     """spin(node) for run_node: an executor of ``executor_kind`` driven by spin_until_signal;
-    ``realtime`` = (priority, cpus) applied to the process's threads first (apply_realtime)."""
+    ``realtime`` = (priority, cpus, cpu wake-up latency [us]) applied to the process's
+    threads first (apply_realtime)."""
     def spin(node):
         executor = make_executor(executor_kind)
         executor.add_node(node)
-        apply_realtime(*realtime, logger=node.get_logger())
+        apply_realtime(*realtime[:2], logger=node.get_logger(), cpu_latency_us=realtime[2])
         try:
             spin_until_signal(executor)
         finally:

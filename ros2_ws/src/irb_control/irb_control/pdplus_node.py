@@ -100,7 +100,7 @@ class PdPlusNode(Node):
         par('require_axis_status', True, 'enable only once the simulator or axis bridge has '
             'reported its status on axis_status, and never while it reports an error')
         par('executor', 'events', "'events' (EventsExecutor, spin_once loop) or 'single'")
-        self.realtime = declare_realtime(self)       # (priority, cpus), applied by main
+        self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
         self.P = P
         self.model = RobotModel.load()
         try:

@@ -92,7 +92,7 @@ class SimulatorNode(Node):
                 "plant electrical parameters YAML ('' = config/plant_electrical.yaml); "
                 "'none' = do not publish electrical_power"),
         }
-        self.realtime = declare_realtime(self)       # (priority, cpus), applied by _spin
+        self.realtime = declare_realtime(self)       # (priority, cpus, latency): _spin
         self.p = p
         if p['mode'] not in ('realtime', 'lockstep'):
             raise ValueError(f"mode must be 'realtime' or 'lockstep', not {p['mode']!r}")
@@ -348,7 +348,8 @@ def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:
 def _spin(node: SimulatorNode) -> None:
     executor = make_executor(node.p['executor'])
     executor.add_node(node)
-    apply_realtime(*node.realtime, logger=node.get_logger())
+    apply_realtime(*node.realtime[:2], logger=node.get_logger(),
+                   cpu_latency_us=node.realtime[2])
     try:
         node.run(executor)
     finally:

@@ -11,7 +11,8 @@ import uuid
 
 import pytest
 
-from irb_control.node_util import apply_realtime, process_threads
+from irb_control import node_util
+from irb_control.node_util import apply_realtime, hold_cpu_latency, process_threads
 
 
 class _Log:
@@ -51,7 +52,7 @@ def test_off_changes_nothing(helper_thread):
     log = _Log()
     before = os.sched_getscheduler(helper_thread)
     out = apply_realtime(0, [], log, threads=[helper_thread])
-    assert out == {'priority': 0, 'cpus': [], 'warnings': []}
+    assert out == {'priority': 0, 'cpus': [], 'cpu_dma_latency_us': -1, 'warnings': []}
     assert os.sched_getscheduler(helper_thread) == before and not log.infos
 
 
@@ -89,13 +90,36 @@ def test_priority_and_affinity_applied(helper_thread):
     cpu = min(os.sched_getaffinity(0))
     out = apply_realtime(7, [cpu], log, threads=[helper_thread])
     try:
-        assert out == {'priority': 7, 'cpus': out['cpus'], 'warnings': []}
+        assert out == {'priority': 7, 'cpus': out['cpus'], 'cpu_dma_latency_us': -1,
+                       'warnings': []}
         assert os.sched_getscheduler(helper_thread) == os.SCHED_FIFO
         assert os.sched_getparam(helper_thread).sched_priority == 7
         assert os.sched_getaffinity(helper_thread) == {cpu}
         assert log.infos and 'SCHED_FIFO priority 7' in log.infos[0]
     finally:
         os.sched_setscheduler(helper_thread, os.SCHED_OTHER, os.sched_param(0))
+
+
+def test_cpu_latency_request_is_written_and_held(tmp_path):
+    """The PM QoS request: a native int32 written to the file, which stays open (closing
+    it would drop the request); a path that cannot be opened is a reason, not a raise."""
+    import struct
+    f = tmp_path / 'cpu_dma_latency'
+    f.write_bytes(b'')
+    assert hold_cpu_latency(0, str(f)) == ''
+    assert f.read_bytes() == struct.pack('i', 0)
+    assert any(h.name == str(f) and not h.closed for h in node_util._LATENCY_REQUESTS)
+    assert 'No such file' in hold_cpu_latency(0, str(tmp_path / 'none' / 'x'))
+
+
+def test_cpu_latency_refused_is_a_warning(monkeypatch):
+    monkeypatch.setattr(node_util, 'hold_cpu_latency', lambda us: 'Permission denied')
+    log = _Log()
+    out = apply_realtime(0, [], log, threads=[], cpu_latency_us=0)
+    assert out['cpu_dma_latency_us'] == -1
+    assert len(log.warnings) == 1 and 'cpu_dma_latency_us 0 not applied' in log.warnings[0]
+    out = apply_realtime(0, [], log, threads=[])         # -1 (default): not asked for
+    assert out['cpu_dma_latency_us'] == -1 and len(log.warnings) == 1
 
 
 def test_process_threads_lists_this_thread():

@@ -376,12 +376,13 @@ def test_indistinguishable_candidates_are_aliases_not_a_split(rng):
     assert step.support == (step.wins.get('b', 0) + step.wins.get('b_alias', 0)) / n >= 0.6
 
 
-def test_split_bootstrap_is_answered_ambiguous_not_named(rng):
-    """Two candidates that explain the data equally well by construction (the data, the
-    noise and the fit/hold-out blocks are symmetric under time reversal, which swaps them),
-    correlated 0.34, so not aliases (each explains something once the other is in): the
-    bootstrap splits between them, so nothing is named; the answer is `ambiguous` with the
-    split, and its sentence says so."""
+def test_split_bootstrap_names_a_needed_pair_jointly_else_ambiguous(rng):
+    """Truth half of one candidate and half of another that explain the data equally well
+    alone by construction (data, noise and fit/hold-out blocks are symmetric under time
+    reversal, which swaps them; correlation 0.34, not aliases): the bootstrap of the first
+    step splits between them. Each is significant once the other is in, so both are named
+    in one joint step with the support of the two-step decision; where the pair cannot be
+    added (max_terms = 1) nothing is named and the answer is `ambiguous`, with the split."""
     from irb_identification.discrepancy_core.report import answer_line
     from irb_identification.discrepancy_core.workflow import verdict
     n = 3100                                    # 31 blocks: reversal keeps their parity
@@ -397,8 +398,19 @@ def test_split_bootstrap_is_answered_ambiguous_not_named(rng):
     def cands(e, fitrow, selected):
         out = [_term('b', cb, xb), _term('c', cb, xc)]
         return [t_ for t_ in out if t_.key() not in selected]
-    fr = forward_select(B, B.y, tbs[tbs % 2 == 0], tbs[tbs % 2 == 1], cands,
-                        lambda t_, v: ({}, []), Decision(n_boot=200))
+
+    def select(**kw):
+        return forward_select(B, B.y, tbs[tbs % 2 == 0], tbs[tbs % 2 == 1], cands,
+                              lambda t_, v: ({}, []), Decision(n_boot=200, **kw))
+    fr = select()
+    assert sorted(t_.name for t_ in fr.selected) == ['b', 'c']
+    first = fr.steps[0]
+    assert max(first.wins.values()) / 200 < 0.6          # the first step alone: a split
+    assert first.stop_reason.startswith('joint step') and first.support >= 0.6
+    assert fr.steps[1].support == first.support
+    np.testing.assert_allclose([fr.beta['b'][0], fr.beta['c'][0]], 0.5, atol=0.03)
+    # no room for two: ambiguous, nothing named
+    fr = select(max_terms=1)
     last = fr.steps[-1]
     assert fr.selected == [] and last.aliases == [], last.stop_reason
     assert 'bootstrap support' in last.stop_reason

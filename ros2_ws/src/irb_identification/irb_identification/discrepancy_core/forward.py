@@ -318,6 +318,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         # bootstrap of the step's decision
         wins = {}
         fit_idx = np.flatnonzero(fitmask_tb)
+        replicates = []                 # (block weights, winner) of each replicate
         for _ in range(decision.n_boot):
             draw = rng.choice(fit_idx, size=len(fit_idx), replace=True)
             wb = np.bincount(draw, minlength=len(all_tb)).astype(float)
@@ -329,6 +330,7 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
                 if db < best[1]:
                     best = (tc_.key(), db)
             wins[best[0]] = wins.get(best[0], 0) + 1
+            replicates.append((wb, best[0]))
         support = sum(wins.get(k, 0) for k in [tc.key()] + aliases) / max(decision.n_boot, 1)
         for r in table:
             r['bootstrap_wins'] = wins.get(r['effect'], 0) / max(decision.n_boot, 1)
@@ -340,6 +342,26 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
             steps.append(step)
             break
         if support < decision.min_confidence:
+            pair = _pair_step(st, W, score, neff, eligible, eligible[0], aliases, replicates,
+                              holdmask_tb, A_S, plausibility, nS, decision)
+            if pair is not None and len(S) + 2 <= decision.max_terms:
+                (tp, p_row), p_support, p_heldout = pair
+                note = (f'joint step: the replicates split ({wins}) between {tc.key()} and '
+                        f'{tp.key()}, each significant once the other is in; the pair is '
+                        f'supported in {100 * p_support:.0f} % of them')
+                step.support, step.heldout_delta, step.stop_reason = p_support, p_heldout, note
+                steps.append(step)
+                steps.append(Step(tp.key(), table, wins, p_support, p_heldout, note,
+                                  best=tp.key(), aliases=p_row.get('aliases', [])))
+                flags[tc.key()] = row['flags']
+                flags[tp.key()] = p_row['flags']
+                S.extend([tc, tp])
+                if log:
+                    log(note)
+                if rebuild is not None:
+                    S = _backfit_scales(B, e0, S, fit_tb, fitrow, rebuild)
+                e = _refit(B, e0, S, fit_tb)
+                continue
             step.added, step.stop_reason = None, (
                 f'{tc.key()}: bootstrap support {support:.2f} < {decision.min_confidence:g} '
                 f'(replicates: {wins})')
@@ -356,6 +378,58 @@ def forward_select(B: Blocks, e0: dict, fit_tb: np.ndarray, hold_tb: np.ndarray,
         e = _refit(B, e0, S, fit_tb)
     fin = final_fit(B, e0, S, fitmask_tb, decision.n_boot, rng)
     return ForwardResult(S, *fin[:2], steps, *fin[2:4], flags, n_eff_last, fin[4])
+
+
+def _pair_step(st, W, score, neff, eligible, first, aliases, replicates, holdmask_tb, A_S,
+               plausibility, nS, decision: Decision):
+    """The step's replicates split between the best candidate and another one (not an
+    alias): if each is significant once the other is in, plausible in their joint refit,
+    the pair lowers the held-out residual, and the replicates that pick either one also
+    find the other significant next (bootstrap of the two-step decision) in at least
+    ``min_confidence`` of them, both go in together. Returns ((term, row), support, held-out
+    dBIC) of the partner, or None. A single effect of two correlated names does not pass:
+    the second adds nothing once the first is in."""
+    d, ci, tc, A_c, k, cbs_c, row = first
+    won = {w for _, w in replicates}
+    partners = [x for x in eligible[1:] if x[2].key() in won and x[2].key() not in aliases]
+    if not partners:
+        return None
+    wins = {x[2].key(): sum(1 for _, w in replicates if w == x[2].key()) for x in partners}
+    d_p, ci_p, tp, A_p, k_p, cbs_p, row_p = max(partners, key=lambda x: wins[x[2].key()])
+    thr = -decision.bic_threshold
+    # each significant once the other is in (full fit part)
+    if not (score(W, A_p, k_p, cbs_p, None, A_S + A_c)[0] < thr and
+            score(W, A_c, k, cbs_c, None, A_S + A_p)[0] < thr):
+        return None
+    A = A_S + A_c + A_p
+    b = st.solve(W, A)
+    vals = st.unscale(A, b)[nS:]
+    if plausibility(tc, vals[:len(A_c)])[0] or plausibility(tp, vals[len(A_c):])[0]:
+        return None
+    heldout = None
+    hold_w = holdmask_tb.astype(float)
+    if hold_w.sum() > 0:
+        Wh = st.weighted(hold_w)
+        r0h = st.rss(Wh, A_S, st.solve(W, A_S))
+        r1h = st.rss(Wh, A, b)
+        ne_h = neff(Wh)
+        heldout = float(sum(ne_h[cb] * np.log(r1h[cb] / r0h[cb]) for cb in Wh))
+        if heldout >= -decision.heldout_threshold:
+            return None
+    keys = {tc.key(), tp.key(), *aliases}
+    support = 0
+    for wb, w in replicates:
+        if w not in keys:
+            continue
+        Wb = st.weighted(wb)
+        other = (A_p, k_p, cbs_p) if w != tp.key() else (A_c, k, cbs_c)
+        base = A_S + (A_c if w != tp.key() else A_p)
+        if score(Wb, *other, None, base)[0] < thr:
+            support += 1
+    support /= max(decision.n_boot, 1)
+    if support < decision.min_confidence:
+        return None
+    return (tp, row_p), support, heldout
 
 
 def final_fit(B: Blocks, e0: dict, S: list, fitmask_tb: np.ndarray, n_boot: int, rng):
