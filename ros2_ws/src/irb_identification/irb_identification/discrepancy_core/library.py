@@ -143,8 +143,12 @@ def pool(channels: list[Channels], model, friction, block_s: float = 1.0,
     P.inertial = inertial_columns(model, P.q, P.qd, P.qdd)
     P.enc_tau = encoder_scale_torque(model, friction, P.q, P.qd, P.qdd)
     P.off_tau = encoder_offset_torque(model, P.q, P.qd, P.qdd)
+    ss = np.sum([c.extra.get('smoothing_bias_ss', [0.0] * 3) for c in channels], axis=0)
+    nm = np.sum([c.extra.get('moving_samples', [0] * 3) for c in channels], axis=0)
     P.noise = {'effort_nm': np.sqrt(np.mean([np.square(c.extra['effort_noise_nm'])
-                                             for c in channels], axis=0))}
+                                             for c in channels], axis=0)),
+               # RMS over the moving samples of every run (residuals.prepare_run)
+               'smoothing_bias_nm': np.sqrt(ss / np.maximum(nm, 1))}
     return P
 
 

@@ -99,11 +99,17 @@ def load_model_file(path: str | Path, joint_names):
 
 def _floors(config, P) -> dict:
     """Noise floor per channel block: the configured clean-data floor combined with the
-    measured effort noise (torque: after the smoother; command: raw)."""
+    measured effort noise (torque: after the smoother; command: raw). For the torque
+    channel the clean-data part is at least this excitation's own smoothing bias (what the
+    smoother does to the model's torque on these motions, residuals.prepare_run): a fast
+    excitation leaves more in a clean residual than the plans the configured floor was set
+    on, and that is not an effect."""
     nf = config.noise_floor
     en = np.asarray(P.noise.get('effort_nm', np.zeros(3)), float)
     raw = np.asarray(P.noise.get('effort_raw_nm', np.zeros(3)), float)
-    return {'torque': [float(np.hypot(nf['torque_nm'][j], en[j])) for j in range(3)],
+    sb = np.asarray(P.noise.get('smoothing_bias_nm', np.zeros(3)), float)
+    return {'torque': [float(np.hypot(max(nf['torque_nm'][j], sb[j]), en[j]))
+                       for j in range(3)],
             'tcp': float(nf['tcp_m']),
             'command': [float(np.hypot(nf['command_nm'][j], raw[j])) for j in range(3)]}
 
