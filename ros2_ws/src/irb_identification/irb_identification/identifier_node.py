@@ -128,6 +128,8 @@ class IdentifierNode(Node):
     def _progress(self) -> None:
         if self.core.received and not self.core.computed:
             self.get_logger().info(self.core.progress())
+            for line in self.core.segment_progress():
+                self.get_logger().info(f'  {line}')
 
     def _compute(self, trigger: str):
         log = self.get_logger()

@@ -81,6 +81,8 @@ class StreamIdentifier:
         self.last_wall = None          # monotonic time [s] of the last message
         self.status: dict | None = None
         self.computed = False
+        self._decoded: list = []       # JointSeries of the messages decoded so far (progress)
+        self._n_decoded = 0
 
     # --- input ---------------------------------------------------------------------------
     def add(self, payload: bytes, recv_ns: int, wall_s: float) -> None:
@@ -133,6 +135,44 @@ class StreamIdentifier:
         exp = self.expected()
         return (f'{self.received} messages received' + (f' of {exp}' if exp else '')
                 + (f' ({self.dropped} over max_messages, not kept)' if self.dropped else ''))
+
+    def segment_progress(self) -> list[str]:
+        """Constant-speed holds found so far, one line per joint: 'joint_3: 9 holds, |v| =
+        0.02, 0.035, ... rad/s' (the sweep's segmentation, segments.find_segments, on what
+        was received; the messages are decoded once, incrementally). [] when nothing (or
+        nothing decodable) arrived; never raises."""
+        from .pipeline import rename
+        from .segments import find_segments
+        from .series import JointSeries
+        try:
+            if self._n_decoded < len(self.data):
+                new = decode_joint_states(self.data[self._n_decoded:],
+                                          self.recv_ns[self._n_decoded:])
+                if self._decoded and new.names != self._decoded[0].names:
+                    return []
+                self._decoded.append(new)
+                self._n_decoded = len(self.data)
+            if not self._decoded:
+                return []
+            parts = self._decoded
+            s = JointSeries(np.concatenate([p.t for p in parts]), parts[0].names,
+                            *(np.concatenate([getattr(p, f) for p in parts])
+                              for f in ('position', 'velocity', 'effort')))
+        except (JointStateError, ValueError):
+            return []
+        s = rename(s, self.config.name_map)
+        order = np.argsort(s.t, kind='stable')
+        s = JointSeries(s.t[order], s.names, s.position[order], s.velocity[order],
+                        s.effort[order])
+        lines = []
+        for j, name in enumerate(s.names):
+            if self.config.joints and name not in self.config.joints:
+                continue
+            segs = find_segments(s, j, self.config.pipeline.fit.segments)
+            speeds = sorted({float(f'{abs(g.speed):.2g}') for g in segs})
+            lines.append(f'{name}: {len(segs)} holds' + (
+                f", |v| = {', '.join(f'{v:g}' for v in speeds)} rad/s" if speeds else ''))
+        return lines
 
     # --- result ----------------------------------------------------------------------------
     def compute(self, trigger: str, progress=None) -> StreamOutcome:

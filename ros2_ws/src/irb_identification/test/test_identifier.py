@@ -185,6 +185,30 @@ def test_stream_core_bad_inputs(tmp_path, model):
             assert 'PARTIAL' in load_friction_map(tmp_path / 'm.yaml').source
 
 
+def test_progress_counts_holds_per_joint_and_speed(sweep_bag):
+    """Progress while the stream comes in: holds found so far per joint, with their speeds;
+    after the whole session joint_3 has its 5 speeds (the profiles', not the code's), one
+    hold each way per speed; halfway, fewer. Garbage does not break it."""
+    from irb_identification.bagio import iter_messages
+    bag, n, _ = sweep_bag
+    msgs = [(t, data) for topic, _, t, data in iter_messages(bag) if topic == '/joint_states']
+    c = StreamIdentifier(StreamConfig(joints=['joint_3']))
+    assert c.segment_progress() == []
+    for t, data in msgs[:n // 2]:
+        c.add(data, t, 0.0)
+    half = c.segment_progress()
+    for t, data in msgs[n // 2:]:
+        c.add(data, t, 0.0)
+    full = c.segment_progress()
+    assert len(full) == 1 and full[0].startswith('joint_3: ')
+    holds = int(full[0].split(': ')[1].split(' holds')[0])
+    assert holds == 2 * len(SPEEDS), full       # one hold each way per speed
+    assert full[0].endswith(f"|v| = {', '.join(f'{v:g}' for v in SPEEDS)} rad/s"), full
+    assert 0 < int(half[0].split(': ')[1].split(' holds')[0]) < holds, half
+    c.add(b'not cdr', 0, 0.0)                 # a message that does not decode: no crash
+    assert c.segment_progress() == []
+
+
 def test_services_compute_and_reset(ctx, tmp_path):
     """~/compute with nothing received: a clear failure, no crash; ~/reset answers."""
     context, executor = ctx
