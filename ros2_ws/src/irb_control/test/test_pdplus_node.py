@@ -256,15 +256,17 @@ def test_realtime_parameters_validated():
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
     try:
         node = PdPlusNode(context=ctx, parameter_overrides=[
-            Parameter('realtime_priority', value=30), Parameter('cpu_affinity', value=[0])])
-        assert node.realtime == (30, [0])      # applied by main() to the process, not here
+            Parameter('realtime_priority', value=30), Parameter('cpu_affinity', value=[0]),
+            Parameter('cpu_dma_latency_us', value=0)])
+        assert node.realtime == (30, [0], 0)   # applied by main() to the process, not here
         node.destroy_node()
         node = PdPlusNode(context=ctx)
-        assert node.realtime == (0, [])
+        assert node.realtime == (0, [], -1)    # -1: the PM QoS latency is left alone
         node.destroy_node()
         for bad in (Parameter('realtime_priority', value=100),
                     Parameter('realtime_priority', value=-1),
-                    Parameter('cpu_affinity', value=[-1])):
+                    Parameter('cpu_affinity', value=[-1]),
+                    Parameter('cpu_dma_latency_us', value=-2)):
             with pytest.raises(ValueError):
                 PdPlusNode(context=ctx, parameter_overrides=[bad])
     finally:
