@@ -25,7 +25,9 @@ possible improvement the grid leaves, and how many cells it covers: a cell with 
 corner is not covered (nothing is claimed there; with none covered the bound is NaN). L_d is
 measured on the grid, not proven: a function that varies faster between grid points than
 between them and their neighbours escapes it. The map is planned on the coarse theta grid,
-the best on the full one; their discretisations differ (0.2 % at the thesis circle).
+the best on the full one; their discretisations differ (0.2 % at the thesis circle). The
+certificate runs per orientation over the centre axes: it claims nothing about the
+rotations and tilts between their grid values.
 """
 from __future__ import annotations
 
