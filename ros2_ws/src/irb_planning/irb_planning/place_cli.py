@@ -1,5 +1,6 @@
 """`ros2 run irb_planning place`: energy-optimal placement of a circle task (offline, no ROS
-graph): grid over a box for the centre x rotations, refinement, certificate, energy map PNG."""
+graph): grid over a box for the centre x rotations x tilts of the plane, refinement,
+certificate, energy map PNG."""
 from __future__ import annotations
 
 import argparse
@@ -21,6 +22,13 @@ def parse_args(argv):
     p.add_argument('--n', type=int, nargs=3, default=[3, 3, 3], help='grid points per axis')
     p.add_argument('--rotations', type=float, nargs='+', default=[0.0],
                    help='rotations about z [deg] (start-angle offsets)')
+    p.add_argument('--tilt-x', type=float, nargs='+', default=[0.0], metavar='DEG',
+                   help='tilts of the circle plane about the base x axis [deg] (grid values; '
+                   'the refinement stays within their range)')
+    p.add_argument('--tilt-y', type=float, nargs='+', default=[0.0], metavar='DEG',
+                   help='tilts of the circle plane about the base y axis [deg]')
+    p.add_argument('--min-tilt-step', type=float, default=2.0,
+                   help='compass search end for the tilts [deg]')
     p.add_argument('--radius', type=float, default=0.15, help='[m]')
     p.add_argument('--direction', type=int, default=1, choices=(1, -1))
     p.add_argument('--duration', type=float, default=10.0, help='[s]')
@@ -40,9 +48,10 @@ def main(args=None):
         argv = argv[:argv.index('--ros-args')]
     a = parse_args(argv)
     try:
-        region = Region(np.array(a.lo), np.array(a.hi), tuple(np.radians(a.rotations)))
-        if a.duration <= 0 or min(a.n) < 1:
-            raise ValueError('duration must be > 0 and every --n >= 1')
+        region = Region(np.array(a.lo), np.array(a.hi), tuple(np.radians(a.rotations)),
+                        tuple(np.radians(a.tilt_x)), tuple(np.radians(a.tilt_y)))
+        if a.duration <= 0 or min(a.n) < 1 or not a.min_tilt_step > 0:
+            raise ValueError('duration and --min-tilt-step must be > 0 and every --n >= 1')
     except ValueError as exc:
         print(f'place: {exc}', file=sys.stderr)
         return 2
@@ -52,7 +61,8 @@ def main(args=None):
                        energy_model=a.energy_model, grid_size=a.grid)
     try:
         res = search(planner, task, region, tuple(a.n), a.coarse_grid, a.refine, a.min_step,
-                     progress=lambda s: print(s, flush=True))
+                     progress=lambda s: print(s, flush=True),
+                     min_tilt_step=np.radians(a.min_tilt_step))
     except KeyboardInterrupt:
         return 130
     if res.best_center is None:
@@ -63,6 +73,7 @@ def main(args=None):
     if a.json:
         out = dict(best_center=res.best_center.tolist(),
                    best_rotation_deg=float(np.degrees(res.best_rotation)),
+                   best_tilt_deg=np.degrees(res.best_tilt).tolist(),
                    best_energy_j=res.best_energy, measure=res.measure,
                    region_lower_bound_j=res.region_lower_bound,
                    possible_improvement_pct=res.possible_improvement_pct,

@@ -366,7 +366,8 @@ class Planner:
             return entry.fourier[order]
 
     def bound(self, req: PlanRequest, duration: float) -> float:
-        """Convex lower bound [J] at ``duration`` for the request's path/grid/limits."""
+        """Convex lower bound [J] at ``duration`` for the request's path/grid/limits, on the
+        request's energy model (mechanical, or electrical with its DC-bus mode)."""
         req = validate(req, self.settings.grid_size, self.settings.max_grid_size)
         fm, _ = self.friction_map(req.friction_map)
         path = request_path(req)
@@ -374,8 +375,11 @@ class Planner:
         base, _ = self._limits(req, fm)
         with entry.lock:
             if entry.bound is None:
+                mode = ENERGY_MODELS[req.energy_model]
                 entry.bound = EnergyBound(entry.nodes, entry.mids, fm, req.boundary,
-                                          2 * self.settings.max_iterations)
+                                          2 * self.settings.max_iterations,
+                                          electrical=self.electrical if mode else None,
+                                          bus_mode=mode or 'shared')
         res = entry.bound.solve(SolveRequest(duration, 0.0, 1.0, base.min_theta_dot,
                                              base.velocity_limit, base.torque_limit))
         if not res.stats.success:
