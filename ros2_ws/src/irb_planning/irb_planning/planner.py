@@ -621,8 +621,8 @@ def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: floa
     if vmax > 0 and T > 0 and T < L / vmax:
         no(f'duration {T:.4g} s is too short for tcp_speed_max {vmax:g} m/s: the '
            f'{L * 1e3:.0f} mm path takes at least {L / vmax:.3f} s at that speed')
-    if vmin > 0 and T > 0:
-        longest = (L - 2 * r) / vmin + (2 * r / L) * t_max
+    if vmin > 0 and T > 0:         # the ramps' floor rises as a constant acceleration's
+        longest = (L + 2 * r) / vmin       # speed: each takes at most 2 r / v_min
         if T > longest:
             no(f'duration {T:.4g} s is too long for tcp_speed_min {vmin:g} m/s: the path '
                f'({L * 1e3:.0f} mm, {r * 1e3:.0f} mm rest ramps) takes at most '
@@ -654,8 +654,8 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
     if band.speed_max > 0 and ver.tcp_speed_peak > band.speed_max * (1 + LIMIT_RTOL):
         fix['tcp_speed_max'] = (sreq.tcp_speed_max - (ver.tcp_speed_peak - band.speed_max)
                                 - 1e-3 * band.speed_max)
-    if band.speed_min > 0 and ver.tcp_speed_low < band.speed_min * (1 - LIMIT_RTOL):
-        fix['tcp_speed_min'] = (sreq.tcp_speed_min + (band.speed_min - ver.tcp_speed_low)
+    if band.speed_min > 0 and ver.tcp_floor_ratio < 1 - LIMIT_RTOL:
+        fix['tcp_speed_min'] = (sreq.tcp_speed_min / ver.tcp_floor_ratio
                                 + 1e-3 * band.speed_min)
     if band.accel_max > 0 and ver.tcp_accel_peak > band.accel_max * (1 + LIMIT_RTOL):
         fix['tcp_accel_max'] = (sreq.tcp_accel_max - (ver.tcp_accel_peak - band.accel_max)

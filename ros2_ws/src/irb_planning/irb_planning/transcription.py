@@ -307,7 +307,10 @@ class Transcription:
             lba[0] = lo / (2 * h[0])
             uba[-1] = -lo / (2 * h[-1])
         # process constraints: a cap and a floor on b (inf / 0 where none: the same numbers)
-        cap_n, cap_m, floor_n, floor_k = self._tcp_bounds(req)
+        cap_n, cap_m, floor_n, floor_k, a_rest = self._tcp_bounds(req)
+        if self.boundary == BOUNDARY_REST:         # leave / reach rest at least as fast as
+            lba[0] = max(lba[0], a_rest[0])         # the ramp floor rises
+            uba[-1] = min(uba[-1], -a_rest[1])
         beta_m = np.minimum(beta_m, cap_m)
         if self.boundary == BOUNDARY_REST:
             lbb = np.maximum(lbb, floor_n[1:-1])
@@ -356,13 +359,19 @@ class Transcription:
     def _tcp_bounds(self, req: SolveRequest):
         """The process constraints as bounds on b: cap at the nodes (N,) and midpoints (K,)
         from tcp_speed_max; floor at the nodes (N,) and per interval (K,) from
-        tcp_speed_min on every interval that reaches beyond tcp_ramp_length from both ends
-        (rest) or on all (periodic). inf / 0 where there is none."""
+        tcp_speed_min: all along a periodic path; on a rest-to-rest one beyond
+        tcp_ramp_length from both ends, and over the ramps rising as a constant-acceleration
+        start / stop would, v^2 >= v_min^2 d / r (d the distance to the nearer rest end), so
+        that a plan cannot creep through its lead-in / lead-out (the energy optimum did: 0.7 s
+        at each end of the 8 s rectangle); per interval the larger value of its two nodes
+        (holds between the samples through the quarter-point and dip rows); the rest
+        intervals get it through theta_ddot at the rest nodes, a_rest (2,) [rad/s^2].
+        inf / 0 where there is none."""
         N, K = self.N, self.N - 1
         cap_n, cap_m = np.full(N, np.inf), np.full(K, np.inf)
-        floor_n, floor_k = np.zeros(N), np.zeros(K)
+        floor_n, floor_k, a_rest = np.zeros(N), np.zeros(K), np.zeros(2)
         if req.tcp_speed_max <= 0 and req.tcp_speed_min <= 0:
-            return cap_n, cap_m, floor_n, floor_k
+            return cap_n, cap_m, floor_n, floor_k, a_rest
         if self.tcp is None:
             raise ValueError('TCP speed bounds need the path in task space (tcp)')
         s1n = np.sum(self.tcp.d1_nodes ** 2, axis=1)          # |p'|^2 [m^2/rad^2]
@@ -371,18 +380,20 @@ class Transcription:
             cap_n, cap_m = req.tcp_speed_max ** 2 / s1n, req.tcp_speed_max ** 2 / s1m
         if req.tcp_speed_min > 0:
             sig = self.tcp.sigma
+            v2 = req.tcp_speed_min ** 2
             if self.boundary == BOUNDARY_REST:
                 r = req.tcp_ramp_length
-                on = (sig[1:] > r) & (sig[:-1] < sig[-1] - r)
-                on[0] = on[-1] = False            # b = 0 at the rest nodes
+                frac = np.clip(np.minimum(sig, sig[-1] - sig) / r, 0.0, 1.0)
+                frac[0] = frac[-1] = 0.0              # b = 0 at the rest nodes
+                floor_n = v2 * frac / s1n
+                fk = np.maximum(frac[:-1], frac[1:])
+                fk[0] = fk[-1] = 0.0                  # the rest intervals: a_rest
+                floor_k = v2 * fk / s1m
+                a_rest = v2 / (2 * r * np.sqrt(s1n[[0, -1]]))
             else:
-                on = np.ones(K, bool)
-            floor_k = np.where(on, req.tcp_speed_min ** 2 / s1m, 0.0)
-            touch = np.zeros(N, bool)
-            touch[:-1] |= on
-            touch[1:] |= on
-            floor_n = np.where(touch, req.tcp_speed_min ** 2 / s1n, 0.0)
-        return cap_n, cap_m, floor_n, floor_k
+                floor_k = v2 / s1m
+                floor_n = v2 / s1n
+        return cap_n, cap_m, floor_n, floor_k, a_rest
 
     def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
         """b constant at the requested mean speed (clipped to the bounds), a from b, e = |y|."""

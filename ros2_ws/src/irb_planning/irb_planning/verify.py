@@ -278,6 +278,7 @@ class Verification:
     tcp_speed_peak: float = float('nan')    # [m/s] as played (NaN: no TcpBand checked)
     tcp_speed_low: float = float('nan')     # [m/s] lowest away from the rest ends
     tcp_accel_peak: float = float('nan')    # [m/s^2] largest |TCP acceleration|
+    tcp_floor_ratio: float = float('nan')   # lowest speed / floor (floor rising over ramps)
 
     @property
     def ok(self) -> bool:
@@ -445,26 +446,33 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
     energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
     elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
     tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems)
-           if band is not None and band.active else (np.nan,) * 3)
+           if band is not None and band.active else (np.nan,) * 4)
     return Verification(problems, float(dev.max()), float(worst_time), energy,
                         float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec,
                         *tcp)
 
 
 def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, rest: bool,
-               problems: list) -> tuple[float, float, float]:
+               problems: list) -> tuple[float, float, float, float]:
     """The process constraints on the played samples; appends a line per broken one to
     ``problems`` (worded without ' speed ' / ' torque ': they are not the joint limits whose
     breach makes the planner add message points). Returns (peak TCP speed, lowest TCP speed
-    away from the rest ends, peak |TCP acceleration|)."""
+    away from the rest ends, peak |TCP acceleration|, lowest speed / floor)."""
     vel, acc = kin.tcp_rates(qs, qds, qdds)
     speed, amag = np.linalg.norm(vel, axis=1), np.linalg.norm(acc, axis=1)
     theta = np.clip(circle.theta(kin.tcp(qs)), 0.0, 2 * np.pi)
     sigma = circle.arc_length(theta)
     length = float(circle.arc_length(np.array([2 * np.pi]))[0])
-    moving = ((sigma >= band.ramp_length) & (sigma <= length - band.ramp_length) if rest
-              else np.ones(sigma.size, bool))
+    # the floor: v_min beyond the ramps; over them v_min sqrt(d / ramp), d the distance to
+    # the nearer rest end (a constant-acceleration start or stop reaching v_min at the ramp)
+    frac = (np.clip(np.minimum(sigma, length - sigma) / max(band.ramp_length, 1e-300),
+                    0.0, 1.0) if rest else np.ones(sigma.size))
+    moving = frac >= 1.0
     low = float(speed[moving].min()) if np.any(moving) else float('nan')
+    floor = band.speed_min * np.sqrt(frac)
+    ramp = (frac > 0) & ~moving
+    ratio = float(np.min(speed[frac > 0] / floor[frac > 0])) if (
+        band.speed_min > 0 and np.any(frac > 0)) else float('nan')
     if band.speed_max > 0 and speed.max() > band.speed_max * (1 + LIMIT_RTOL):
         k = int(np.argmax(speed))
         problems.append(f'tcp_speed_max {band.speed_max:.4g} m/s exceeded: the TCP moves at '
@@ -475,9 +483,15 @@ def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, res
         problems.append(f'tcp_speed_min {band.speed_min:.4g} m/s not kept: the TCP moves at '
                         f'{speed[k]:.4g} m/s at t = {ts[k]:.3f} s ({sigma[k] * 1e3:.0f} mm '
                         f'along the path, ramps {band.ramp_length * 1e3:.0f} mm)')
+    if band.speed_min > 0 and np.any(ramp) and np.any(speed[ramp] < floor[ramp]
+                                                        * (1 - LIMIT_RTOL)):
+        k = int(np.flatnonzero(ramp)[np.argmin(speed[ramp] / floor[ramp])])
+        problems.append(f'tcp_speed_min ramp not kept: the TCP moves at {speed[k]:.4g} m/s '
+                        f'{sigma[k] * 1e3:.1f} mm along the path (t = {ts[k]:.3f} s), below '
+                        f'the ramp floor {floor[k]:.4g} m/s')
     if band.accel_max > 0 and amag.max() > band.accel_max * (1 + LIMIT_RTOL):
         k = int(np.argmax(amag))
         problems.append(f'tcp_accel_max {band.accel_max:.4g} m/s^2 exceeded: '
                         f'|TCP acceleration| {amag[k]:.4g} m/s^2 at t = {ts[k]:.3f} s '
                         f'({sigma[k] * 1e3:.0f} mm along the path)')
-    return float(speed.max()), low, float(amag.max())
+    return float(speed.max()), low, float(amag.max()), ratio

@@ -56,6 +56,10 @@ def test_the_band_holds_as_played(planner, model, free, banded):
                                                     - BAND['tcp_ramp_length'])
     assert speed.max() <= BAND['tcp_speed_max'] * (1 + 1e-6)
     assert speed[moving].min() >= BAND['tcp_speed_min'] * (1 - 1e-6)
+    # over the ramps no creeping: at least a constant-acceleration start / stop's speed
+    d = np.minimum(sigma, PATH.length - sigma)
+    ramp_floor = BAND['tcp_speed_min'] * np.sqrt(np.clip(d / BAND['tcp_ramp_length'], 0, 1))
+    assert np.all(speed >= ramp_floor * (1 - 1e-6))
     # a time derivative by finite differences of 1 kHz samples: 0.2 % for its own error
     # (the independent check measured it in closed form; they agree to that)
     assert acc.max() <= BAND['tcp_accel_max'] * 1.002
