@@ -193,10 +193,24 @@ def markdown_report(run_id: str, energy: RunFigures, trapezoid: RunFigures,
     return text
 
 
+def _num(x: float, fmt: str = '.3f') -> str:
+    return '–' if x != x else format(x, fmt)
+
+
+def _band_cell(plan) -> str:
+    """'low-peak' TCP speed of a plan as played ('–' if the planner did not check it)."""
+    if plan.tcp_speed_peak != plan.tcp_speed_peak:
+        return '–'
+    return f'{_num(plan.tcp_speed_low)}-{_num(plan.tcp_speed_peak)}'
+
+
 def rectangle_section(energy: RunFigures, trapezoid: RunFigures, plots: dict[str, str],
-                      plan_e, plan_t, rect: dict, path, out: Path) -> list[str]:
-    """Markdown lines of the gluing-contour task: the two runs' energy and camera path
-    error, the plans' figures, the plots. plan_e/plan_t: the planner's responses."""
+                      plan_e, plan_t, rect: dict, path, out: Path, band: str = ''
+                      ) -> list[str]:
+    """Markdown lines of the gluing-contour task: the process constraints ``band`` (in
+    words, '' = none), the two runs' planned and executed energy and camera path error, the
+    plans' TCP speed and acceleration as played, the plots. plan_e/plan_t: the planner's
+    responses."""
     def rel(p):
         return Path(p).resolve().relative_to(out.parent.resolve()).as_posix() \
             if Path(p).resolve().is_relative_to(out.parent.resolve()) else str(p)
@@ -208,12 +222,15 @@ def rectangle_section(energy: RunFigures, trapezoid: RunFigures, plots: dict[str
         f'{rect["normal"]}, {rect["blend_radius_m"] * 1e3:.0f} mm corner blends, '
         f'length {path.length:.3f} m in {rect["duration_s"]} s (mean TCP speed '
         f'{speed:.3f} m/s); pdplus follows it by projection (PathTracker).', '',
-        '| run | duration [s] | energy [J] | camera path error mean [mm] | max [mm] |',
-        '|---|---|---|---|---|',
-        *[f'| {name}, identified FF | {r.duration:.2f} | {r.energy:.1f} | '
-          f'{r.err_mean_mm:.3f} | {r.err_max_mm:.3f} |'
-          for name, r in (('energy-optimal', energy), ('trapezoid along arc length',
-                                                       trapezoid))], '',
+        f'Process constraints of both plans: {band or "none"}.', '',
+        '| run | duration [s] | energy planned [J] | executed [J] | camera path error mean '
+        '[mm] | max [mm] | planned TCP speed [m/s] | planned max \\|a\\| [m/s²] |',
+        '|---|---|---|---|---|---|---|---|',
+        *[f'| {name}, identified FF | {r.duration:.2f} | {p.energy:.1f} | {r.energy:.1f} | '
+          f'{r.err_mean_mm:.3f} | {r.err_max_mm:.3f} | {_band_cell(p)} | '
+          f'{_num(p.tcp_accel_peak)} |'
+          for name, r, p in (('energy-optimal', energy, plan_e),
+                             ('trapezoid along arc length', trapezoid, plan_t))], '',
         f'**Saving: {saving:.1f} %** of the trapezoidal run\'s energy (planned: '
         f'{plan_e.energy:.1f} J vs {plan_t.energy:.1f} J).', '',
         f'![power]({rel(plots["power"])})', '',

@@ -117,9 +117,10 @@ class Link:
             self.ex.spin_once(timeout_sec=0.05)
         return cond()
 
-    def plan(self, cfg, objective, friction_map, group, path=None, duration=None):
+    def plan(self, cfg, objective, friction_map, group, path=None, duration=None,
+             process=None):
         """Plan on the thesis circle of ``cfg``, or on ``path`` (a PathSpec) for ``duration``
-        [s]."""
+        [s]; ``process``: PlanPath's process-constraint fields (tcp_speed_max, ...)."""
         if not self.spin_until(lambda: self.client.service_is_ready(), 60, group):
             raise RuntimeError('planner service plan_path did not come up')
         req = self.PlanPath.Request()
@@ -134,6 +135,8 @@ class Link:
         req.duration = float(cfg['circle_duration_s'] if duration is None else duration)
         req.grid_size = int(cfg['planner_grid'])
         req.friction_map = str(friction_map)
+        for field, value in (process or {}).items():
+            setattr(req, field, float(value))
         fut = self.client.call_async(req)
         if not self.spin_until(fut.done, 300, group):
             raise RuntimeError(f'planner gave no answer for the {objective} plan')
@@ -252,7 +255,7 @@ def main(args=None) -> int:
         executed = {}
         plans = {}
 
-        def execute(g, label, objective, friction, path=None, duration=None):
+        def execute(g, label, objective, friction, path=None, duration=None, process=None):
             name = f'{run_id}_{label}'
             link.modes.clear()
             g.add(ProcessSpec(f'rec_{label}', ros2_run_cmd(
@@ -261,7 +264,7 @@ def main(args=None) -> int:
                                             for t in ('/joint_states', '/controller_state',
                                                       '/camera/tcp')), 60):
                 raise RuntimeError(f'recorder for {label} did not subscribe')
-            plans[label] = link.plan(cfg, objective, friction, g, path, duration)
+            plans[label] = link.plan(cfg, objective, friction, g, path, duration, process)
             stamp = plans[label].trajectory.header.stamp
             # pdplus checks every plan (its plan gate) and says so on ~/plan_status; the verdict
             # is the one about this plan (its stamp), not a count: each phase starts a new
@@ -313,12 +316,16 @@ def main(args=None) -> int:
         rect_file = write_rectangle(rect, out / 'rectangle_path.yaml')
         from irb_planning.messages import path_msg_from_spec
         rect_msg = path_msg_from_spec(yaml.safe_load(rect_file.read_text()))
+        band = rectangle_process(rect)
         log(f'5/{PHASES} gluing contour: {rect["width_m"]} x {rect["height_m"]} m rectangle, '
             f'{rect["blend_radius_m"] * 1e3:.0f} mm blends, tilted plane, '
-            f'{rect["duration_s"]} s, energy-optimal and trapezoidal, identified FF')
+            f'{rect["duration_s"]} s, energy-optimal and trapezoidal, identified FF; '
+            + (process_text(band) or 'no process constraints'))
         g = graph([sim, controller('file', rect_file), planner])
-        execute(g, 'rect_energy_ff', 'energy', fmap, rect_msg, float(rect['duration_s']))
-        execute(g, 'rect_trapezoid_ff', 'trapezoid', fmap, rect_msg, float(rect['duration_s']))
+        execute(g, 'rect_energy_ff', 'energy', fmap, rect_msg, float(rect['duration_s']),
+                band)
+        execute(g, 'rect_trapezoid_ff', 'trapezoid', fmap, rect_msg, float(rect['duration_s']),
+                band)
         g.stop()
 
         # 6 ---------------------------------------------------------------------------------
@@ -343,13 +350,41 @@ def main(args=None) -> int:
             link.close()
 
 
+#: the rectangle block's process-constraint keys -> PlanPath request fields
+PROCESS_KEYS = {'tcp_speed_max_m_s': 'tcp_speed_max', 'tcp_speed_min_m_s': 'tcp_speed_min',
+                'tcp_accel_max_m_s2': 'tcp_accel_max', 'tcp_ramp_length_m': 'tcp_ramp_length'}
+
+
+def rectangle_process(rect: dict) -> dict:
+    """The config's process constraints of the gluing contour as PlanPath fields ({} if
+    none are set)."""
+    return {field: float(rect[key]) for key, field in PROCESS_KEYS.items() if key in rect}
+
+
+def process_text(band: dict) -> str:
+    """The process constraints in words ('' if none)."""
+    parts = []
+    if band.get('tcp_speed_min') or band.get('tcp_speed_max'):
+        parts.append(f'bead speed {band.get("tcp_speed_min", 0.0):g}-'
+                     f'{band.get("tcp_speed_max", float("inf")):g} m/s beyond '
+                     f'{band.get("tcp_ramp_length", 0.0) * 1e3:.0f} mm from start and stop')
+    if band.get('tcp_accel_max'):
+        parts.append(f'|TCP acceleration| <= {band["tcp_accel_max"]:g} m/s^2')
+    return ', '.join(parts)
+
+
 def write_rectangle(rect: dict, out: Path) -> Path:
     """The gluing contour of the config's ``rectangle`` block as a path YAML file (what
-    pdplus's path_file and the plan client read)."""
-    from irb_description.path import path_spec, rectangle_path
+    pdplus's path_file and the plan client read), with its process constraints as the
+    file's ``process`` block (the plan client takes them from there)."""
+    from irb_description.path import PROCESS_KEY, path_spec, rectangle_path
     path = rectangle_path(rect['center_m'], rect['normal'], float(rect['width_m']),
                           float(rect['height_m']), float(rect['blend_radius_m']))
-    out.write_text(yaml.safe_dump(path_spec(path), default_flow_style=None))
+    spec = path_spec(path)
+    band = rectangle_process(rect)
+    if band:
+        spec[PROCESS_KEY] = band
+    out.write_text(yaml.safe_dump(spec, default_flow_style=None))
     return out
 
 
@@ -413,7 +448,8 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
         sections = rectangle_section(figs['rect_energy_ff'], figs['rect_trapezoid_ff'],
                                      rect_plots, plans['rect_energy_ff'],
                                      plans['rect_trapezoid_ff'], cfg['rectangle'], rect,
-                                     out / 'report.md')
+                                     out / 'report.md',
+                                     process_text(rectangle_process(cfg['rectangle'])))
     markdown_report(run_id, figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff'],
                     plots, rows, sorted(str(p) for p in (out / 'friction').glob('*.png')),
                     plan_rows, str(plan_plot), bags, notes, out / 'report.md', sections)
@@ -428,6 +464,14 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     if 'rect_energy_ff' in figs and 'rect_trapezoid_ff' in figs:
         summary['rectangle_energy_saving_percent'] = saving_percent(
             figs['rect_energy_ff'].energy, figs['rect_trapezoid_ff'].energy)
+        summary['rectangle_planned_saving_percent'] = saving_percent(
+            plans['rect_energy_ff'].energy, plans['rect_trapezoid_ff'].energy)
+        summary['rectangle_process'] = rectangle_process(cfg['rectangle'])
+        for k in ('rect_energy_ff', 'rect_trapezoid_ff'):
+            summary[k].update(planned_energy_j=plans[k].energy,
+                              planned_tcp_speed_low_m_s=plans[k].tcp_speed_low,
+                              planned_tcp_speed_peak_m_s=plans[k].tcp_speed_peak,
+                              planned_tcp_accel_peak_m_s2=plans[k].tcp_accel_peak)
     summary['elapsed_s'] = elapsed
     (out / 'summary.json').write_text(json.dumps(summary, indent=2))
     for k in ('energy_saving_percent', 'path_error_reduction_percent',
@@ -436,8 +480,8 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
             log(f'   {k}: {summary[k]:.1f}')
     for k in ('rect_energy_ff', 'rect_trapezoid_ff'):
         if k in figs:
-            log(f'   {k}: {figs[k].energy:.1f} J, path error mean {figs[k].err_mean_mm:.3f} '
-                f'mm, max {figs[k].err_max_mm:.3f} mm')
+            log(f'   {k}: {figs[k].energy:.1f} J executed ({plans[k].energy:.1f} J planned), '
+                f'path error mean {figs[k].err_mean_mm:.3f} mm, max {figs[k].err_max_mm:.3f} mm')
 
 
 if __name__ == '__main__':

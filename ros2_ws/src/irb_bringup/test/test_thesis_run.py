@@ -43,6 +43,42 @@ def test_the_gluing_rectangle_file(tmp_path):
     np.testing.assert_allclose((pts - [0.7, 0.0, 0.3]) @ n, 0.0, atol=1e-15)
 
 
+@pytest.mark.parametrize('section', ['full', 'quick'])
+def test_the_configured_gluing_band_holds_for_the_trapezoid(tmp_path, section):
+    """The main job's process constraints (thesis_run.yaml) go into the rectangle's path file
+    and fit the trapezoid along arc length at the configured duration: the planner, whose
+    independent check measures the played TCP speed and acceleration, accepts it; its cruise
+    speed L / (0.9 T) lies inside the band, which is +-25 % of the mean bead speed."""
+    from pathlib import Path
+
+    import numpy as np
+    import yaml
+    from irb_description.path import load_path_file, process_from_spec
+    from irb_planning.planner import Planner, PlannerSettings
+    from irb_planning.request import PlanRequest
+
+    from irb_bringup.thesis_run import rectangle_process, write_rectangle
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
+                          / 'thesis_run.yaml').read_text())[section]['rectangle']
+    band = rectangle_process(cfg)
+    f = write_rectangle(cfg, tmp_path / 'r.yaml')
+    assert process_from_spec(yaml.safe_load(f.read_text())) == band
+    path = load_path_file(f)
+    T = float(cfg['duration_s'])
+    mean = path.length / T
+    assert band['tcp_speed_min'] == pytest.approx(0.75 * mean, rel=0.02)
+    assert band['tcp_speed_max'] == pytest.approx(1.25 * mean, rel=0.02)
+    spec = yaml.safe_load(f.read_text())
+    planner = Planner(settings=PlannerSettings(grid_size=60))
+    r = planner.plan(PlanRequest(path_type='polyline', waypoints=np.asarray(spec['waypoints']),
+                                 blend_radii=np.asarray(spec['blend_radii']), closed=True,
+                                 objective='trapezoid', duration=T, **band))
+    assert r.verification.ok
+    assert band['tcp_speed_min'] < path.length / (0.9 * T) < band['tcp_speed_max']
+    assert band['tcp_speed_min'] < r.verification.tcp_speed_peak <= band['tcp_speed_max']
+    assert r.verification.tcp_accel_peak <= band['tcp_accel_max']
+
+
 def test_quick_pipeline_end_to_end(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     res = subprocess.run(['ros2', 'run', 'irb_bringup', 'thesis_run', '--quick',
@@ -76,6 +112,13 @@ def test_quick_pipeline_end_to_end(tmp_path):
         assert s[run]['path_error_mean_mm'] < 0.5 * s['energy_noff']['path_error_mean_mm'], \
             (run, s[run], s['energy_noff'])
     assert (out / 'plots' / 'rectangle' / 'path_error.png').stat().st_size > 10_000
+    # both rectangle plans kept the configured gluing band as played (the planner's check)
+    band = s['rectangle_process']
+    assert 'Process constraints of both plans: bead speed' in report
+    for run in ('rect_energy_ff', 'rect_trapezoid_ff'):
+        assert s[run]['planned_tcp_speed_peak_m_s'] <= band['tcp_speed_max'] * (1 + 1e-6)
+        assert s[run]['planned_tcp_speed_low_m_s'] >= band['tcp_speed_min'] * (1 - 1e-6)
+        assert s[run]['planned_tcp_accel_peak_m_s2'] <= band['tcp_accel_max'] * (1 + 1e-6)
     # friction compensation must cut the camera path error clearly (thesis: 25-50 %)
     assert s['path_error_reduction_percent'] > 25
     # equal duration, and the optimum is not worse than the baseline beyond tracking noise

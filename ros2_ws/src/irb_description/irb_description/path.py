@@ -26,6 +26,11 @@ from .model import RobotModel, UnreachableError
 
 TWO_PI = 2.0 * np.pi
 PATH_TYPES = ('circle', 'arc', 'line', 'polyline', 'spline')
+#: optional block of a path mapping with process constraints for the planner (not geometry)
+PROCESS_KEY = 'process'
+#: its keys, SI units: TCP speed band [m/s], |TCP acceleration| bound [m/s^2], length [m] at
+#: each rest end where the speed may stay below tcp_speed_min (the planner's PlanRequest)
+PROCESS_FIELDS = ('tcp_speed_max', 'tcp_speed_min', 'tcp_accel_max', 'tcp_ramp_length')
 
 
 class PathBase:
@@ -505,7 +510,8 @@ def path_from_spec(spec: dict) -> PathBase:
     'line': waypoints [start, end];
     'polyline': waypoints, blend_radii (one, or one per corner), closed (false);
     'spline': waypoints, closed (false).
-    ValueError with the reason for anything else.
+    An optional ``process`` block (TCP speed band, ``process_from_spec``) is not geometry and
+    is ignored here. ValueError with the reason for anything else.
     """
     if not isinstance(spec, dict):
         raise ValueError('a path spec must be a mapping with a "type"')
@@ -516,7 +522,7 @@ def path_from_spec(spec: dict) -> PathBase:
              'spline': {'waypoints', 'closed'}}
     if kind not in known:
         raise ValueError(f'unknown path type {kind!r}; one of {list(PATH_TYPES)}')
-    extra = set(spec) - known[kind] - {'type'}
+    extra = set(spec) - known[kind] - {'type', PROCESS_KEY}
     if extra:
         raise ValueError(f'path type {kind!r} takes {sorted(known[kind])}, not {sorted(extra)}')
 
@@ -551,6 +557,32 @@ def path_from_spec(spec: dict) -> PathBase:
         return SplinePath(w, closed)
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{kind}: {exc}') from None
+
+
+def process_from_spec(spec: dict) -> dict:
+    """The ``process`` block of a path mapping as {field: float} (only the fields it has; {}
+    without a block): a process's constraints along the path, e.g. a gluing bead's speed band
+
+        process: {tcp_speed_max: 0.15, tcp_speed_min: 0.09, tcp_accel_max: 1.0,
+                  tcp_ramp_length: 0.04}
+
+    ValueError (one line) for unknown keys or values that are not finite numbers >= 0. Whether
+    the band fits the path and the duration is the planner's to judge."""
+    if not isinstance(spec, dict) or spec.get(PROCESS_KEY) is None:
+        return {}
+    block = spec[PROCESS_KEY]
+    if not isinstance(block, dict):
+        raise ValueError(f'{PROCESS_KEY} must be a mapping of {list(PROCESS_FIELDS)}')
+    extra = set(block) - set(PROCESS_FIELDS)
+    if extra:
+        raise ValueError(f'{PROCESS_KEY} takes {list(PROCESS_FIELDS)}, not {sorted(extra)}')
+    out = {}
+    for key, x in block.items():
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) \
+                or x < 0:
+            raise ValueError(f'{PROCESS_KEY}.{key} must be a finite number >= 0, got {x!r}')
+        out[key] = float(x)
+    return out
 
 
 def path_spec(path: PathBase) -> dict:

@@ -12,7 +12,11 @@ Every success is re-checked by the independent check at 5 kHz and 16 samples per
 a path re-built from the request (bench_random's standard: a success that fails it is an
 "invalid success"). Per path type (line, arc, polyline, spline, rectangle): the energy plan at
 1.5 x T_min + 1 s and the trapezoid at the same duration, saving and solve time.
-Writes results/paths.json.
+``--profile``: one more warm polyline request under cProfile (cumulative time of the plan's
+stages: solve, 1 kHz evaluation, message building, the independent check and its parts) and
+IPOPT's own timers of that solve (function and derivative evaluations vs the rest of IPOPT,
+i.e. its linear algebra), to say where a warm plan() call's time goes.
+Writes results/paths.json (``--name`` to write another file).
 """
 import argparse
 import os
@@ -81,11 +85,59 @@ def recheck(planner, res):
                        min_samples_per_segment=16)
 
 
+#: (module file, function) of the plan's stages reported by --profile
+STAGES = [('planner.py', '_plan'), ('planner.py', '_solve_checked'),
+          ('transcription.py', 'solve'), ('planner.py', 'trajectory'),
+          ('evaluator.py', 'evaluate'), ('verify.py', 'verify_plan'),
+          ('verify.py', 'profile_segment_time'), ('verify.py', 'quintic'),
+          ('verify.py', 'deviation'), ('planner.py', 'rigid_torque'),
+          ('planner.py', 'rates_consistent'), ('path.py', 'joint_path'),
+          ('profile.py', 'theta_at'), ('planner.py', 'evaluate')]
+
+
+def profile_one(planner, spec, T):
+    """Where one warm plan() call's time goes: cProfile cumulative seconds per stage and
+    IPOPT's timers (t_wall_*) of the transcription's solvers after it."""
+    import cProfile
+    import pstats
+    prof = cProfile.Profile()
+    s = time.perf_counter()
+    prof.enable()
+    r = planner.plan(request(spec, duration=T))
+    prof.disable()
+    out = {'plan_call_s': time.perf_counter() - s, 'solve_time_s': r.solve_time,
+           'iterations': r.iterations, 'message_points': len(r.trajectory['t'])}
+    stats = pstats.Stats(prof).stats
+    cum = {}
+    for (fname, _, func), (_, _, _, ct, _) in stats.items():
+        for mod, name in STAGES:
+            if fname.endswith(mod) and func == name:
+                key = f'{mod[:-3]}.{name}'
+                cum[key] = max(cum.get(key, 0.0), ct)
+    out['cumulative_s'] = cum
+    for entry in planner._cache.values():
+        for label, solver in (('warm', entry.transcription._solver_warm),
+                              ('cold', entry.transcription._solver_cold)):
+            if solver is None:
+                continue
+            st = solver.stats()
+            t = {k: float(v) for k, v in st.items() if k.startswith('t_wall_')}
+            evals = sum(v for k, v in t.items() if k.startswith('t_wall_nlp_'))
+            out[f'ipopt_{label}'] = {'iterations': int(st.get('iter_count', -1)),
+                                     'status': str(st.get('return_status')), **t,
+                                     'function_evaluations_s': evals,
+                                     'rest_of_ipopt_s': t.get('t_wall_total', np.nan) - evals}
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--grid', type=int, default=400)
     ap.add_argument('--warm', type=int, default=30)
     ap.add_argument('--no-types', action='store_true', help='only the 10-segment polyline')
+    ap.add_argument('--profile', action='store_true',
+                    help='profile one more warm polyline request (where the time goes)')
+    ap.add_argument('--name', default='paths', help='results/<name>.json')
     ap.add_argument('--circle', action='store_true',
                     help='also the thesis circle warm at the same grid, same load (reference)')
     a = ap.parse_args()
@@ -131,6 +183,10 @@ def main():
         'p90_solve_s': float(np.percentile(solve, 90)), 'max_solve_s': float(max(solve)),
         'median_plan_call_s': float(np.median(total)),
         'median_iterations': float(np.median(iters))}
+    if a.profile:
+        T = float(T * 1.01)
+        out['polyline10']['profile'] = prof = profile_one(planner, spec, T)
+        print('profile', prof, flush=True)
     if a.circle:
         cp = Planner(planner.model.copy(), PlannerSettings(grid_size=a.grid))
         Tc = 1.5 * cp.plan(PlanRequest(objective='time')).min_duration
@@ -169,7 +225,7 @@ def main():
     out['invalid_successes'] = len(invalid)
     out['invalid'] = invalid
     out['load_average_after'] = os.getloadavg()
-    dump('paths', out)
+    dump(a.name, out)
 
 
 if __name__ == '__main__':

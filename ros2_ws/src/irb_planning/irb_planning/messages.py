@@ -35,7 +35,9 @@ def request_from_msg(msg: PlanPath.Request) -> PlanRequest:
         normal=np.array([p.normal.x, p.normal.y, p.normal.z], float), sweep=p.sweep,
         waypoints=np.array([[w.x, w.y, w.z] for w in p.waypoints], float).reshape(-1, 3),
         blend_radii=np.asarray(p.blend_radii, float), closed=bool(p.closed),
-        energy_model=msg.energy_model)
+        energy_model=msg.energy_model, tcp_speed_max=msg.tcp_speed_max,
+        tcp_speed_min=msg.tcp_speed_min, tcp_accel_max=msg.tcp_accel_max,
+        tcp_ramp_length=msg.tcp_ramp_length)
 
 
 def path_msg(req: PlanRequest) -> PathSpec:
@@ -136,6 +138,9 @@ def fill_response(resp: PlanPath.Response, result: PlanResult, nodes: dict
         resp.standby_energy = float(ver.electrical['standby'])
     resp.optimizer_electrical_energy = float(result.optimizer_electrical_energy)
     resp.energy_model = result.request.energy_model
+    resp.tcp_speed_peak = float(ver.tcp_speed_peak)
+    resp.tcp_speed_low = float(ver.tcp_speed_low)
+    resp.tcp_accel_peak = float(ver.tcp_accel_peak)
     if base is not None and base.electrical:
         resp.baseline_electrical_energy = [float(base.electrical[f'total_{m}'])
                                            for m in modes]

@@ -9,8 +9,11 @@
     waypoints: [[0.55, -0.15, 0.25], [0.85, -0.15, 0.3], [0.85, 0.15, 0.3]]
     blend_radii: [0.03]
     closed: false
+    process: {tcp_speed_max: 0.15, tcp_speed_min: 0.09, tcp_accel_max: 1.0}   # optional
 
-(types circle, arc, line, polyline, spline; the circle options are used without it).
+(types circle, arc, line, polyline, spline; the circle options are used without it). The
+optional ``process`` block holds the process constraints (irb_description.path
+``process_from_spec``); the --tcp-* options override its values.
 
 Exit code 0 on success, 1 if the planner refused (its error code and message are printed),
 2 if the service did not answer.
@@ -56,6 +59,15 @@ def parse_args(argv):
     p.add_argument('--energy-model', default='',
                    help="mechanical | electrical_none | electrical_shared | "
                         "electrical_regenerative ('' = mechanical)")
+    for name, unit, what in (
+            ('speed-max', 'm/s', 'TCP speed ceiling'),
+            ('speed-min', 'm/s', 'TCP speed floor away from the rest ends'),
+            ('accel-max', 'm/s^2', 'bound on |TCP acceleration|'),
+            ('ramp-length', 'm', 'arc length at each rest end free of the floor (0 = '
+             'speed-min^2 / accel-max)')):
+        p.add_argument(f'--tcp-{name}', type=float, default=None,
+                       help=f'[{unit}] {what}; 0 = none (default: the path file\'s process '
+                       'block, else none)')
     p.add_argument('--service', default='plan_path')
     p.add_argument('--timeout', type=float, default=120.0, help='[s]')
     p.add_argument('--plot', default='plan.png', help="PNG path, '' = no plot")
@@ -72,10 +84,22 @@ def read_path_file(name: str) -> PathSpec:
         raise ValueError(f'path file {name}: {exc}') from None
 
 
+def read_path_process(name: str) -> dict:
+    """The process constraints {field: value} of a YAML path file's optional ``process``
+    block ({} without one); ValueError with one line saying why not."""
+    from irb_description.path import process_from_spec, read_path_spec
+    try:
+        return process_from_spec(read_path_spec(name))
+    except ValueError as exc:
+        raise ValueError(f'path file {name}: {exc}') from None
+
+
 def build_request(a) -> PlanPath.Request:
     req = PlanPath.Request()
+    process = {}
     if a.path_file:
         req.path = read_path_file(a.path_file)
+        process = read_path_process(a.path_file)
     else:
         req.path = PathSpec(type=PathSpec.TYPE_CIRCLE,
                             center=Point(x=a.center[0], y=a.center[1], z=a.center[2]),
@@ -87,6 +111,9 @@ def build_request(a) -> PlanPath.Request:
     req.grid_size, req.limit_scaling = a.grid, a.limit_scaling
     req.friction_map, req.boundary = a.friction_map, a.boundary
     req.energy_model = a.energy_model
+    for field in ('tcp_speed_max', 'tcp_speed_min', 'tcp_accel_max', 'tcp_ramp_length'):
+        value = getattr(a, field)
+        setattr(req, field, float(process.get(field, 0.0) if value is None else value))
     return req
 
 
@@ -108,6 +135,10 @@ def summary(resp: PlanPath.Response) -> str:
         if len(resp.baseline_electrical_energy) > k and resp.baseline_electrical_energy[k]:
             ratio = resp.electrical_energy[k] / resp.baseline_electrical_energy[k]
             lines.append(f'saving vs trapezoid, electrical {mode}: {100 * (1 - ratio):.2f} %')
+    if np.isfinite(resp.tcp_speed_peak) and resp.tcp_speed_peak > 0:
+        lines.append(f'TCP as played: speed {resp.tcp_speed_low:.4g} (away from the rest '
+                     f'ends) .. {resp.tcp_speed_peak:.4g} m/s, |acceleration| <= '
+                     f'{resp.tcp_accel_peak:.4g} m/s^2')
     if resp.electrical_bus_modes:
         lines.append(f'objective energy model: {resp.energy_model or "mechanical"}; copper '
                      f'{resp.copper_energy:.1f} J, standby {resp.standby_energy:.1f} J')

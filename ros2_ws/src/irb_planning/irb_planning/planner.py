@@ -45,8 +45,9 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       OBJECTIVE_ENERGY, OBJECTIVE_TIME,
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
-                            SolveRequest, Transcription)
-from .verify import ArmKinematics, Circle, MapFriction, PathCurve, Verification, verify_plan
+                            SolveRequest, TcpPath, Transcription)
+from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve, TcpBand,
+                     Verification, verify_plan)
 
 
 @dataclass(frozen=True)
@@ -186,8 +187,9 @@ class Planner:
                 self._checked_paths.popitem(last=False)
 
     def _entry(self, req: PlanRequest, path: PathBase, fm: FrictionMap) -> _Entry:
+        accel_rows = req.tcp_accel_max > 0      # the |TCP acceleration| rows: own problem
         key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__(),
-               req.energy_model)
+               req.energy_model) + (('tcp_accel',) if accel_rows else ())
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
@@ -215,7 +217,8 @@ class Planner:
                            s.max_iterations, s.tolerance, s.warm_start, sides,
                            electrical=self.electrical if mode else None,
                            bus_mode=mode or 'shared',
-                           electrical_smoothing=s.electrical_smoothing_w)
+                           electrical_smoothing=s.electrical_smoothing_w,
+                           tcp=tcp_path(path, theta), accel_rows=accel_rows)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
@@ -268,17 +271,20 @@ class Planner:
         tau = lim.torque * req.limit_scaling
         keep = 1.0 - self.settings.constraint_margin
         nlp = SolveRequest(0.0, 0.0, 1.0, self.settings.min_theta_dot_rad_s, vel * keep,
-                           tau * keep)
+                           tau * keep, req.tcp_speed_max * keep,
+                           req.tcp_speed_min * (2.0 - keep), req.tcp_accel_max * keep,
+                           req.tcp_ramp_length)
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
     def _solve_checked(self, sreq: SolveRequest, checked: LimitSet, check, solve,
-                       fixed_duration: float):
+                       fixed_duration: float, band: TcpBand | None = None):
         """Solve, rescale the profile to the exact ``fixed_duration`` (0 = keep its own) and
         ``check`` it (1 kHz evaluation and the independent check of its message); where a
         speed or torque limit is broken (the exact map against the NLP's smooth one, torque
         between grid points), tighten that limit by the measured excess and solve again, at
-        most adapt_rounds times. Returns (result, profile, (evaluation, trajectory,
-        verification), notes); raises PlanError if the solver fails."""
+        most adapt_rounds times; likewise a process constraint of ``band`` (TCP speed band,
+        acceleration) the played trajectory breaks. Returns (result, profile, (evaluation,
+        trajectory, verification), notes); raises PlanError if the solver fails."""
         notes = []
         for attempt in range(self.settings.adapt_rounds + 1):
             res = solve(sreq)
@@ -295,7 +301,8 @@ class Planner:
                 return res, profile, checks, notes
             over_tau = np.maximum(ev.peak_torque, ver.peak_torque) - checked.torque
             over_v = np.maximum(ev.peak_speed, ver.peak_speed) - checked.velocity
-            if not (np.any(over_tau > 0) or np.any(over_v > 0)):
+            tcp_fix = tighten_band(sreq, band, ver)
+            if not (np.any(over_tau > 0) or np.any(over_v > 0) or tcp_fix):
                 return res, profile, checks, notes          # not a limit: nothing to tighten
             tau = np.where(over_tau > 0, sreq.torque_limit - over_tau - 1e-3 * checked.torque,
                            sreq.torque_limit)
@@ -308,22 +315,25 @@ class Planner:
                                 'coarse for this path, ask for a larger grid_size')
             notes.append('limits tightened after the exact check: '
                          + '; '.join(ev.violations + ver.problems))
-            sreq = replace(sreq, torque_limit=tau, velocity_limit=vel)
+            sreq = replace(sreq, torque_limit=tau, velocity_limit=vel, **tcp_fix)
         raise AssertionError('unreachable')
 
-    def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, check
-                     ) -> tuple[float, tuple]:
+    def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, check,
+                     band: TcpBand | None = None) -> tuple[float, tuple]:
         """Time-optimal duration [s] (exact time law of a profile that passes the checks)
-        and ``_solve_checked``'s output for it; cached per limits."""
+        and ``_solve_checked``'s output for it; cached per limits and process constraints."""
         key = (base.min_theta_dot, tuple(base.velocity_limit), tuple(base.torque_limit))
+        if band is not None:
+            key += base.process_key
         with entry.lock:
             if key in entry.min_duration:
                 return entry.min_duration[key]
-        req = SolveRequest(0.0, 1.0, TIME_OBJECTIVE_ENERGY_WEIGHT, base.min_theta_dot,
-                           base.velocity_limit, base.torque_limit)
+        req = replace(base, duration=0.0, time_weight=1.0,
+                      energy_weight=TIME_OBJECTIVE_ENERGY_WEIGHT)
         try:
             out = self._solve_checked(req, checked, check,
-                                      lambda r: entry.transcription.solve(r, warm=False), 0.0)
+                                      lambda r: entry.transcription.solve(r, warm=False), 0.0,
+                                      band)
         except PlanError as exc:
             infeasible = 'cannot all be met' in exc.message
             raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
@@ -410,12 +420,19 @@ class Planner:
             ev = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz,
                           self.electrical)
             return (ev, *self.trajectory(profile, req, path, fm, raw_map, checked))
-        t_min, t_out = self.min_duration(entry, base, checked, check)
+        band = request_band(req)
+        t_max = self.max_duration(entry, base.min_theta_dot)
+        if band is not None:
+            check_band_fits(req, path, entry, t_max)
+        try:
+            t_min, t_out = self.min_duration(entry, base, checked, check, band)
+        except PlanError as exc:
+            raise _band_error(exc, band, 'at all') from None
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
             raise PlanError(ERROR_INFEASIBLE_DURATION,
                             f'duration {req.duration:.4f} s is shorter than the time-optimal '
-                            f'{t_min:.4f} s for this path and limits')
-        t_max = self.max_duration(entry, base.min_theta_dot)
+                            f'{t_min:.4f} s for this path and limits'
+                            + (f' ({band_text(band)})' if band is not None else ''))
         if req.duration > t_max:
             raise PlanError(ERROR_INFEASIBLE_DURATION,
                             f'duration {req.duration:.6g} s is longer than the slowest motion '
@@ -436,14 +453,21 @@ class Planner:
             if checks[0].violations:
                 raise PlanError(ERROR_INFEASIBLE_DURATION, 'the trapezoid at this duration '
                                 'breaks a limit: ' + '; '.join(checks[0].violations))
+            broken = [p for p in checks[2].problems if p.startswith('tcp_')]
+            if broken:
+                raise PlanError(ERROR_INFEASIBLE_DURATION, 'the trapezoid at this duration '
+                                'breaks the process constraints: ' + '; '.join(broken))
         else:
-            sreq = SolveRequest(req.duration, req.time_weight, 1.0, base.min_theta_dot,
-                                base.velocity_limit, base.torque_limit)
+            sreq = replace(base, duration=req.duration, time_weight=req.time_weight,
+                           energy_weight=1.0)
             solve = entry.transcription.solve
             if req.objective != OBJECTIVE_ENERGY:
                 solve = self.fourier_problem(entry, req.fourier_order, sample).solve
-            res, profile, checks, notes = self._solve_checked(sreq, checked, check, solve,
-                                                              req.duration)
+            try:
+                res, profile, checks, notes = self._solve_checked(sreq, checked, check, solve,
+                                                                  req.duration, band)
+            except PlanError as exc:
+                raise _band_error(exc, band) from None
             coeffs = getattr(res, 'coeffs', None)
             e_opt, stats = res.energy, res.stats
         evaluation, trajectory, verification = checks
@@ -506,7 +530,7 @@ class Planner:
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
                               req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
                               path_tolerance_m=s.path_tolerance_m,
-                              electrical=self.electrical)
+                              electrical=self.electrical, band=request_band(req))
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
@@ -533,6 +557,122 @@ class Planner:
     def node_samples(self, result: PlanResult) -> dict:
         """The plan's trajectory message points (checked): t (K,) [s]; q, qd, qdd, tau (K, n)."""
         return result.trajectory
+
+
+def tcp_path(path: PathBase, theta: np.ndarray) -> TcpPath:
+    """p' and p'' of ``path`` at the grid ``theta`` and its midpoints; at piece ends (where
+    p'' jumps) the nodes take the more curved side (as the nodes' dynamics do) and the
+    sides the other one."""
+    d1n, d2n = path.d_point(theta), path.dd_point(theta).copy()
+    mids = 0.5 * (theta[1:] + theta[:-1])
+    d1s, d2s = np.zeros((0, 3)), np.zeros((0, 3))
+    near = np.isin(theta, path.breaks) if path.breaks.size else np.zeros(theta.size, bool)
+    if np.any(near):
+        b = theta[near]
+        lo, hi = path.dd_point(b - 1e-9), path.dd_point(b + 1e-9)
+        lo_curved = (np.linalg.norm(lo, axis=1) > np.linalg.norm(hi, axis=1))[:, None]
+        d2n[near] = np.where(lo_curved, lo, hi)
+        d1s, d2s = d1n[near], np.where(lo_curved, hi, lo)
+    return TcpPath(d1n, d2n, path.d_point(mids), path.dd_point(mids), d1s, d2s,
+                   theta * path.length / (2 * np.pi))
+
+
+def request_band(req: PlanRequest) -> TcpBand | None:
+    """The request's process constraints as the independent check takes them (None: none)."""
+    if not req.has_process:
+        return None
+    return TcpBand(req.tcp_speed_max, req.tcp_speed_min, req.tcp_accel_max,
+                   req.tcp_ramp_length)
+
+
+def band_text(band: TcpBand) -> str:
+    """The process constraints in words."""
+    parts = []
+    if band.speed_min > 0 or band.speed_max > 0:
+        parts.append('TCP speed ' + (f'>= {band.speed_min:g} m/s beyond '
+                                     f'{band.ramp_length * 1e3:.0f} mm from the rest ends'
+                                     if band.speed_min > 0 else '')
+                     + (' and ' if band.speed_min > 0 and band.speed_max > 0 else '')
+                     + (f'<= {band.speed_max:g} m/s' if band.speed_max > 0 else ''))
+    if band.accel_max > 0:
+        parts.append(f'|TCP acceleration| <= {band.accel_max:g} m/s^2')
+    return 'process constraints: ' + ', '.join(parts)
+
+
+def _band_error(exc: PlanError, band: TcpBand | None, what: str = 'of this duration'
+                ) -> PlanError:
+    """A solver failure under process constraints: infeasible (code 3) when IPOPT found the
+    rows cannot all be met, with the constraints named; otherwise ``exc`` unchanged."""
+    if band is None or 'cannot all be met' not in exc.message:
+        return exc
+    return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
+                     f'{band_text(band)} together with the robot limits ({exc.message})')
+
+
+def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float) -> None:
+    """Refuse (code 3, one line) process constraints this path and duration cannot meet
+    before any solve: a duration below length / tcp_speed_max, or above what the speed floor
+    allows; a floor at which the centripetal acceleration in a bend away from the rest ends
+    exceeds tcp_accel_max; rest ramps shorter than the grid's first interval."""
+    L = path.length
+    T = req.duration
+    rest = req.boundary == BOUNDARY_REST
+    r = req.tcp_ramp_length if rest else 0.0
+    vmax, vmin, amax = req.tcp_speed_max, req.tcp_speed_min, req.tcp_accel_max
+
+    def no(msg):
+        raise PlanError(ERROR_INFEASIBLE_DURATION, msg)
+    if vmax > 0 and T > 0 and T < L / vmax:
+        no(f'duration {T:.4g} s is too short for tcp_speed_max {vmax:g} m/s: the '
+           f'{L * 1e3:.0f} mm path takes at least {L / vmax:.3f} s at that speed')
+    if vmin > 0 and T > 0:         # the ramps' floor rises as a constant acceleration's
+        longest = (L + 2 * r) / vmin       # speed: each takes at most 2 r / v_min
+        if T > longest:
+            no(f'duration {T:.4g} s is too long for tcp_speed_min {vmin:g} m/s: the path '
+               f'({L * 1e3:.0f} mm, {r * 1e3:.0f} mm rest ramps) takes at most '
+               f'{longest:.2f} s at that speed; plan a shorter motion and wait at rest')
+    if vmin <= 0:
+        return
+    tcp = entry.transcription.tcp
+    sig = tcp.sigma
+    if rest and r <= sig[1] * (1 + 1e-12):
+        no(f'tcp_ramp_length {r * 1e3:.2f} mm is within the first grid interval '
+           f'({sig[1] * 1e3:.2f} mm at {sig.size} nodes): no room to reach tcp_speed_min')
+    if amax > 0:
+        zone = (sig >= r) & (sig <= L - r) if rest else np.ones(sig.size, bool)
+        s1 = np.sum(tcp.d1_nodes ** 2, axis=1)
+        kappa = np.linalg.norm(tcp.d2_nodes, axis=1) / s1          # curvature [1/m]
+        k = int(np.argmax(np.where(zone, kappa, 0.0)))
+        if zone[k] and vmin ** 2 * kappa[k] > amax:
+            no(f'at tcp_speed_min {vmin:g} m/s the centripetal acceleration in the bend of '
+               f'radius {1e3 / kappa[k]:.1f} mm ({sig[k] * 1e3:.0f} mm along the path) is '
+               f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2')
+
+
+def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) -> dict:
+    """SolveRequest fields of the process constraints the played trajectory broke, tightened
+    by the measured excess + 0.1 % (as the joint limits in ``_solve_checked``); {} if none."""
+    if band is None:
+        return {}
+    fix = {}
+    if band.speed_max > 0 and ver.tcp_speed_peak > band.speed_max * (1 + LIMIT_RTOL):
+        fix['tcp_speed_max'] = (sreq.tcp_speed_max - (ver.tcp_speed_peak - band.speed_max)
+                                - 1e-3 * band.speed_max)
+    if band.speed_min > 0 and ver.tcp_floor_ratio < 1 - LIMIT_RTOL:
+        fix['tcp_speed_min'] = (sreq.tcp_speed_min / ver.tcp_floor_ratio
+                                + 1e-3 * band.speed_min)
+    if band.accel_max > 0 and ver.tcp_accel_peak > band.accel_max * (1 + LIMIT_RTOL):
+        fix['tcp_accel_max'] = (sreq.tcp_accel_max - (ver.tcp_accel_peak - band.accel_max)
+                                - 1e-3 * band.accel_max)
+    vmax = fix.get('tcp_speed_max', sreq.tcp_speed_max)
+    vmin = fix.get('tcp_speed_min', sreq.tcp_speed_min)
+    if (fix.get('tcp_accel_max', 1.0) <= 0 or fix.get('tcp_speed_max', 1.0) <= 0
+            or (vmax > 0 and vmin >= vmax)):
+        raise PlanError(ERROR_SOLVER, 'between the grid nodes the motion breaks the process '
+                        'constraints by more than their band (' + '; '.join(
+                            p for p in ver.problems if p.startswith('tcp_'))[:300]
+                        + '): ask for a larger grid_size')
+    return fix
 
 
 def rates_consistent(t, q, qd, qdd, rtol: float = 0.025, atol: float = 1e-4) -> bool:

@@ -94,6 +94,18 @@ class PlanRequest:
     blend_radii: np.ndarray = field(default_factory=lambda: np.zeros(0))
     closed: bool = False
     energy_model: str = ''               # one of ENERGY_MODELS; '' = mechanical
+    # process constraints (0 = none): TCP speed band [m/s] (the floor away from the rest
+    # ends, i.e. beyond tcp_ramp_length [m] of arc length from each; 0 = speed_min^2 /
+    # accel_max), |TCP acceleration| [m/s^2]
+    tcp_speed_max: float = 0.0
+    tcp_speed_min: float = 0.0
+    tcp_accel_max: float = 0.0
+    tcp_ramp_length: float = 0.0
+
+    @property
+    def has_process(self) -> bool:
+        """True if any process constraint is set."""
+        return bool(self.tcp_speed_max or self.tcp_speed_min or self.tcp_accel_max)
 
     @property
     def path_key(self) -> tuple:
@@ -138,7 +150,9 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
         bad(f'path type {req.path_type!r} unknown; one of {list(PATH_TYPES)}')
     circle = req.path_type in (PATH_CIRCLE, PATH_ARC)
     numbers = {'duration': req.duration, 'time_weight': req.time_weight,
-               'limit_scaling': req.limit_scaling}
+               'limit_scaling': req.limit_scaling, 'tcp_speed_max': req.tcp_speed_max,
+               'tcp_speed_min': req.tcp_speed_min, 'tcp_accel_max': req.tcp_accel_max,
+               'tcp_ramp_length': req.tcp_ramp_length}
     if circle:
         numbers.update(center=req.center, radius=req.radius, start_angle=req.start_angle)
     if req.path_type == PATH_ARC:
@@ -215,6 +229,7 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
             f'path; this {req.path_type} is open')
     if not math.isfinite(req.duration):
         bad('duration is not finite')
+    ramp = _process_ramp(req, boundary, path.length, bad)
     # the angle of the start point, reduced exactly (fmod is exact in floating point): a huge
     # angle would otherwise leave no digits for theta in cos(s theta + phi0)
     start = math.fmod(float(req.start_angle), 2 * math.pi)
@@ -224,4 +239,42 @@ def validate(req: PlanRequest, default_grid: int, max_grid: int = 1000) -> PlanR
                    boundary=boundary, normal=np.asarray(req.normal, float),
                    sweep=float(req.sweep), waypoints=np.asarray(req.waypoints, float),
                    blend_radii=np.atleast_1d(np.asarray(req.blend_radii, float)),
-                   closed=bool(req.closed), energy_model=energy_model)
+                   closed=bool(req.closed), energy_model=energy_model,
+                   tcp_speed_max=float(req.tcp_speed_max),
+                   tcp_speed_min=float(req.tcp_speed_min),
+                   tcp_accel_max=float(req.tcp_accel_max), tcp_ramp_length=ramp)
+
+
+def _process_ramp(req: PlanRequest, boundary: str, length: float, bad) -> float:
+    """Check the process constraints on their own (against each other and the path length;
+    whether the path and duration allow them is the planner's to find) and return the ramp
+    length [m] at each rest end where the speed may stay below tcp_speed_min."""
+    vmax, vmin, amax = req.tcp_speed_max, req.tcp_speed_min, req.tcp_accel_max
+    ramp = float(req.tcp_ramp_length)
+    for name in ('tcp_speed_max', 'tcp_speed_min', 'tcp_accel_max', 'tcp_ramp_length'):
+        if getattr(req, name) < 0:
+            bad(f'{name} must be >= 0 (0 = none), got {getattr(req, name)}')
+    if not req.has_process:
+        if ramp:
+            bad('tcp_ramp_length without tcp_speed_min means nothing')
+        return 0.0
+    if req.objective == OBJECTIVE_FOURIER:
+        bad('the Fourier profile takes no process constraints (tcp_*); use the energy, time '
+            'or trapezoid objective')
+    if vmax and vmin and not vmin < vmax:
+        bad(f'tcp_speed_min {vmin:g} m/s must be below tcp_speed_max {vmax:g} m/s')
+    if not vmin:
+        if ramp:
+            bad('tcp_ramp_length without tcp_speed_min means nothing')
+        return 0.0
+    if boundary != BOUNDARY_REST:
+        return 0.0                        # periodic: the floor holds all along the path
+    if not ramp:
+        if not amax:
+            bad('tcp_speed_min on a rest-to-rest plan needs tcp_ramp_length (the start and '
+                'stop ramps) or tcp_accel_max (ramps of tcp_speed_min^2 / tcp_accel_max)')
+        ramp = vmin ** 2 / amax
+    if not 2 * ramp < length:
+        bad(f'the start and stop ramps ({ramp * 1e3:.1f} mm each) leave no part of the '
+            f'{length * 1e3:.1f} mm path for the speed floor')
+    return ramp

@@ -23,6 +23,20 @@ moves it by < 0.2 % (benchmarks/bench_timing.py).
             twice the time at delta): a_0 >= delta^2 / (2 h_0), a_{N-1} <= -delta^2 / (2 h)
           b <= speed bound at nodes and midpoints; |tau| <= tau_max at every node and midpoint
           boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}, a_0 = a_{N-1}
+          process constraints (``TcpPath`` given, request fields > 0), p' = dp/dtheta:
+            TCP speed |p'| sqrt(b) <= v_max: b <= v_max^2 / |p'|^2, a bound on b at the
+              nodes, midpoints and quarter points (linear in b);
+            TCP speed >= v_min away from the rest ends (every interval reaching past
+              tcp_ramp_length of arc length from both ends; all of a periodic path): the same
+              as a lower bound, also on the dip rows, so it holds between the samples too;
+            |TCP acceleration| = |p'' b + p' a| <= a_max at the nodes, midpoints and the
+              other side of every piece end: the Euclidean norm (frame-independent, the one
+              number a process and a controller care about, and since theta is proportional
+              to arc length p' is normal to p'', so it is sqrt(tangential^2 + centripetal^2)
+              and a per-axis box would allow sqrt(3) times more in a diagonal direction);
+              written as the convex quadratic row |p'' b + p' a|^2 <= a_max^2. These rows
+              exist only in problems built with ``accel_rows`` (the default problem is the
+              same NLP as without process constraints, bit for bit).
 
 |y| is exact: epigraph variables e >= +-y with sum e minimised (no bias at the optimum), or,
 if ``abs_smoothing`` eps > 0, sqrt(y^2 + eps^2), whose bias is at most 2 pi n eps [J]. The
@@ -37,9 +51,9 @@ losses of holding are paid). P is the model's CasADi form with ``electrical_smoo
 [W] for IPOPT; the reported electrical energy uses eps = 0. The mechanical epigraph stays in
 the objective with weight 1e-6 so that its variables remain determined.
 
-The NLP is built once per (path, grid, boundary, friction, energy model); duration, weights, delta and the
-limits are parameters or bounds, so a new request only re-solves (warm-started from the last
-solution). No ROS imports.
+The NLP is built once per (path, grid, boundary, friction, energy model, acceleration rows);
+duration, weights, delta, the limits and the process constraints are parameters or bounds,
+so a new request only re-solves (warm-started from the last solution). No ROS imports.
 """
 from __future__ import annotations
 
@@ -77,6 +91,30 @@ class SolveRequest:
     min_theta_dot: float
     velocity_limit: np.ndarray
     torque_limit: np.ndarray
+    tcp_speed_max: float = 0.0     # [m/s], 0 = none (the planner applies its margin)
+    tcp_speed_min: float = 0.0     # [m/s], 0 = none; away from the rest ends
+    tcp_accel_max: float = 0.0     # [m/s^2], 0 = none (needs a problem with accel_rows)
+    tcp_ramp_length: float = 0.0   # [m] of arc length at each rest end free of tcp_speed_min
+
+    @property
+    def process_key(self) -> tuple:
+        return (self.tcp_speed_max, self.tcp_speed_min, self.tcp_accel_max,
+                self.tcp_ramp_length)
+
+
+@dataclass(frozen=True)
+class TcpPath:
+    """The path in task space on the grid: p' and p'' [m/rad, m/rad^2] at the nodes (N, 3),
+    the midpoints (K, 3) and the other side of the piece-end nodes (S, 3; the indices are
+    the transcription's ``sides``), arc length of the nodes sigma (N,) [m]."""
+
+    d1_nodes: np.ndarray
+    d2_nodes: np.ndarray
+    d1_mids: np.ndarray
+    d2_mids: np.ndarray
+    d1_sides: np.ndarray
+    d2_sides: np.ndarray
+    sigma: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -99,13 +137,17 @@ class Transcription:
                  boundary: str = BOUNDARY_REST, abs_smoothing: float = 0.0,
                  max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True,
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
-                 electrical_smoothing: float = 0.5):
+                 electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
+                 accel_rows: bool = False):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
-        there, Phi'' is not). Their torques get rows too, so the limits hold on both sides."""
+        there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
+        ``tcp``: the path in task space, for process constraints (speed band as bounds);
+        ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
+        self.tcp, self.accel_rows = tcp, bool(accel_rows and tcp is not None)
         self.abs_smoothing = float(abs_smoothing)
         self._lock = threading.Lock()
         self._last = None
@@ -220,6 +262,18 @@ class Transcription:
                      + friction(ca.DM(sd.dq.T) * rep(ca.sqrt(b_s))))
             g_rows += [ca.vec(tau_s)]                # |tau| <= limit on the other side too
             self._n_side = idx.size
+        self._n_acc = 0
+        if self.accel_rows:                          # |p'' b + p' a|^2 <= a_max^2
+            acc = [ca.DM(tcp.d2_nodes.T) * ca.repmat(ca.reshape(b, 1, -1), 3, 1)
+                   + ca.DM(tcp.d1_nodes.T) * ca.repmat(ca.reshape(a, 1, -1), 3, 1),
+                   ca.DM(tcp.d2_mids.T) * ca.repmat(ca.reshape(b_mid, 1, -1), 3, 1)
+                   + ca.DM(tcp.d1_mids.T) * ca.repmat(ca.reshape(a_mid, 1, -1), 3, 1)]
+            if sides is not None and len(sides[0]):
+                acc.append(ca.DM(tcp.d2_sides.T) * ca.repmat(ca.reshape(b_s, 1, -1), 3, 1)
+                           + ca.DM(tcp.d1_sides.T) * ca.repmat(ca.reshape(a_s, 1, -1), 3, 1))
+            acc_rows = ca.vertcat(*[ca.transpose(ca.sum1(r ** 2)) for r in acc])
+            g_rows += [acc_rows]
+            self._n_acc = acc_rows.numel()
         g = ca.vertcat(*g_rows)
         self._rows = np.cumsum([0] + [r.numel() for r in g_rows])
 
@@ -252,6 +306,18 @@ class Transcription:
             h = np.diff(self.nodes.theta)
             lba[0] = lo / (2 * h[0])
             uba[-1] = -lo / (2 * h[-1])
+        # process constraints: a cap and a floor on b (inf / 0 where none: the same numbers)
+        cap_n, cap_m, floor_n, floor_k, a_rest = self._tcp_bounds(req)
+        if self.boundary == BOUNDARY_REST:         # leave / reach rest at least as fast as
+            lba[0] = max(lba[0], a_rest[0])         # the ramp floor rises
+            uba[-1] = min(uba[-1], -a_rest[1])
+        beta_m = np.minimum(beta_m, cap_m)
+        if self.boundary == BOUNDARY_REST:
+            lbb = np.maximum(lbb, floor_n[1:-1])
+            ubb = np.minimum(ubb, cap_n[1:-1])
+        else:
+            lbb = np.maximum(lbb, floor_n[:-1])
+            ubb = np.minimum(ubb, cap_n[:-1])
         lbx = np.concatenate([lbb, lba, np.zeros(self._ne)])
         ubx = np.concatenate([ubb, uba, np.full(self._ne, np.inf)])
         if req.duration > 0:
@@ -269,9 +335,12 @@ class Transcription:
         lo_dip = np.full(K, lo)
         if self.boundary == BOUNDARY_REST:
             lo_dip[0] = lo_dip[-1] = -np.inf      # the rest intervals have their own rows
-        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_sub), np.zeros(K), -tau_n, -tau_m,
+        on = floor_k > 0                          # the speed floor's intervals (rest: never
+        lo_sub = np.where(on, np.maximum(lo_sub, floor_k), lo_sub)   # the first or last)
+        lo_dip = np.where(on, np.maximum(lo_dip, floor_k), lo_dip)
+        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_sub), floor_k, -tau_n, -tau_m,
                -tau_rev, np.tile(lo_dip, n_sub + 2)]
-        ubg = [[ut], np.zeros(K), np.full(n_sub * K, np.inf), beta_m, tau_n, tau_m, tau_rev,
+        ubg = [[ut], np.zeros(K), np.tile(cap_m, n_sub), beta_m, tau_n, tau_m, tau_rev,
                np.full((n_sub + 2) * K, np.inf)]
         if self._ne:
             lbg += [np.zeros(self._ne // 2)]
@@ -279,7 +348,52 @@ class Transcription:
         if self._n_side:
             lbg += [-np.tile(tau_lim, self._n_side)]
             ubg += [np.tile(tau_lim, self._n_side)]
+        if req.tcp_accel_max > 0 and not self._n_acc:
+            raise ValueError('tcp_accel_max needs a problem built with accel_rows')
+        if self._n_acc:
+            lbg += [np.full(self._n_acc, -np.inf)]
+            ubg += [np.full(self._n_acc, req.tcp_accel_max ** 2 if req.tcp_accel_max > 0
+                            else np.inf)]
         return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
+
+    def _tcp_bounds(self, req: SolveRequest):
+        """The process constraints as bounds on b: cap at the nodes (N,) and midpoints (K,)
+        from tcp_speed_max; floor at the nodes (N,) and per interval (K,) from
+        tcp_speed_min: all along a periodic path; on a rest-to-rest one beyond
+        tcp_ramp_length from both ends, and over the ramps rising as a constant-acceleration
+        start / stop would, v^2 >= v_min^2 d / r (d the distance to the nearer rest end), so
+        that a plan cannot creep through its lead-in / lead-out (the energy optimum did: 0.7 s
+        at each end of the 8 s rectangle); per interval the larger value of its two nodes
+        (holds between the samples through the quarter-point and dip rows); the rest
+        intervals get it through theta_ddot at the rest nodes, a_rest (2,) [rad/s^2].
+        inf / 0 where there is none."""
+        N, K = self.N, self.N - 1
+        cap_n, cap_m = np.full(N, np.inf), np.full(K, np.inf)
+        floor_n, floor_k, a_rest = np.zeros(N), np.zeros(K), np.zeros(2)
+        if req.tcp_speed_max <= 0 and req.tcp_speed_min <= 0:
+            return cap_n, cap_m, floor_n, floor_k, a_rest
+        if self.tcp is None:
+            raise ValueError('TCP speed bounds need the path in task space (tcp)')
+        s1n = np.sum(self.tcp.d1_nodes ** 2, axis=1)          # |p'|^2 [m^2/rad^2]
+        s1m = np.sum(self.tcp.d1_mids ** 2, axis=1)
+        if req.tcp_speed_max > 0:
+            cap_n, cap_m = req.tcp_speed_max ** 2 / s1n, req.tcp_speed_max ** 2 / s1m
+        if req.tcp_speed_min > 0:
+            sig = self.tcp.sigma
+            v2 = req.tcp_speed_min ** 2
+            if self.boundary == BOUNDARY_REST:
+                r = req.tcp_ramp_length
+                frac = np.clip(np.minimum(sig, sig[-1] - sig) / r, 0.0, 1.0)
+                frac[0] = frac[-1] = 0.0              # b = 0 at the rest nodes
+                floor_n = v2 * frac / s1n
+                fk = np.maximum(frac[:-1], frac[1:])
+                fk[0] = fk[-1] = 0.0                  # the rest intervals: a_rest
+                floor_k = v2 * fk / s1m
+                a_rest = v2 / (2 * r * np.sqrt(s1n[[0, -1]]))
+            else:
+                floor_k = v2 / s1m
+                floor_n = v2 / s1n
+        return cap_n, cap_m, floor_n, floor_k, a_rest
 
     def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
         """b constant at the requested mean speed (clipped to the bounds), a from b, e = |y|."""
@@ -311,7 +425,8 @@ class Transcription:
                 and last.time_weight == req.time_weight
                 and last.min_theta_dot == req.min_theta_dot
                 and np.array_equal(last.velocity_limit, req.velocity_limit)
-                and np.array_equal(last.torque_limit, req.torque_limit))
+                and np.array_equal(last.torque_limit, req.torque_limit)
+                and last.process_key == req.process_key)
         if req.duration > 0 and last.duration > 0:
             return same and abs(req.duration / last.duration - 1) <= 0.2
         return same and req.duration == last.duration
@@ -320,6 +435,13 @@ class Transcription:
         """Solve for ``req``; warm start from the previous solution when there is one."""
         with self._lock:
             lbx, ubx, lbg, ubg = self._bounds(req)
+            if np.any(lbx > ubx) or np.any(lbg > ubg):
+                # bounds that contradict each other (a TCP speed floor above what the joint
+                # speed limits allow somewhere): infeasible, IPOPT's word for it, unsolved
+                nan = float('nan')
+                return TranscriptionResult(None, nan, nan, np.full(self.n, nan),
+                                           SolveStats('Infeasible_Problem_Detected', False,
+                                                      0, 0.0))
             p = [req.energy_weight, req.time_weight]
             use_warm = self.use_warm_start if warm is None else warm
             t0 = time.perf_counter()

@@ -21,7 +21,12 @@ profile's time law:
   function, pinocchio RNEA on the URDF in the planner) + friction evaluated from the map's
   numbers here;
 * **energy** of the played trajectory, int sum_i |tau_i qd_i| dt (thesis eq. 6.8-6.9), and
-  its electrical energy for every DC-bus mode when an ElectricalModel is given.
+  its electrical energy for every DC-bus mode when an ElectricalModel is given;
+* **process constraints** (``TcpBand``) along the played trajectory: TCP velocity and
+  acceleration from its own DH kinematics, differentiated in closed form through the DH
+  product (v = dp/dt, a = d2p/dt2 from q, qd, qdd), the speed band (the floor only where the
+  TCP's own projection onto the path is beyond the ramp length of arc length from both
+  rest ends, the arc length from its own table of the path) and |a|.
 """
 from __future__ import annotations
 
@@ -58,6 +63,10 @@ class Circle:
         ang = np.unwrap(ang)
         return ang - 2 * np.pi * np.round(ang[0] / (2 * np.pi))
 
+    def arc_length(self, theta: np.ndarray) -> np.ndarray:
+        """Arc length [m] from the start of the points at ``theta``."""
+        return self.radius * np.asarray(theta, float)
+
 
 class PathCurve:
     """Any other path, given by its definition p(theta), p'(theta), p''(theta) (vectorised
@@ -74,7 +83,19 @@ class PathCurve:
         length = float(np.linalg.norm(np.diff(coarse, axis=0), axis=1).sum())
         n = int(min(max(length / 5e-4, 256), 200000))
         self._th = np.linspace(0.0, 2 * np.pi, n + 1)
-        self._tree = cKDTree(point(self._th))
+        table = point(self._th)
+        self._tree = cKDTree(table)
+        self._sigma = None
+        self._table = table
+
+    def arc_length(self, theta: np.ndarray) -> np.ndarray:
+        """Arc length [m] from the start of the points at ``theta``: chords of a table of
+        16 points per table interval, summed and interpolated."""
+        if self._sigma is None:
+            fine = np.linspace(0.0, 2 * np.pi, 16 * (self._th.size - 1) + 1)
+            chords = np.linalg.norm(np.diff(self.point(fine), axis=0), axis=1)
+            self._fine, self._sigma = fine, np.concatenate([[0.0], np.cumsum(chords)])
+        return np.interp(np.asarray(theta, float), self._fine, self._sigma)
 
     def _nearest(self, p: np.ndarray) -> np.ndarray:
         _, j = self._tree.query(p)
@@ -149,6 +170,54 @@ class ArmKinematics:
             T = T @ A
         return T[:, :3, 3]
 
+    def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """TCP velocity and acceleration (M, 3) [m/s, m/s^2] of joint motions (M, 3): the DH
+        product differentiated in time, T' = sum of the products with one A_i replaced by
+        dA_i/dt (A_i' qd_i), T'' likewise with A_i'' qd_i^2 + A_i' qdd_i and 2 A_i' A_j'
+        terms, carried along the product as (T, T', T'')."""
+        M = q.shape[0]
+        q6, v6, a6 = (np.zeros((M, 6)) for _ in range(3))
+        q6[:, :q.shape[1]], v6[:, :q.shape[1]], a6[:, :q.shape[1]] = q, qd, qdd
+        T = np.broadcast_to(np.eye(4), (M, 4, 4)).copy()
+        T1, T2 = np.zeros((M, 4, 4)), np.zeros((M, 4, 4))
+        for i in range(6):
+            th = q6[:, i] + self.offset[i]
+            ct, st = np.cos(th), np.sin(th)
+            ca, sa = np.cos(self.alpha[i]), np.sin(self.alpha[i])
+            A, dA, ddA = (np.zeros((M, 4, 4)) for _ in range(3))
+            # A depends on theta through (cos, sin); dA/dtheta swaps them to (-sin, cos)
+            for out, c, s_, const in ((A, ct, st, True), (dA, -st, ct, False),
+                                      (ddA, -ct, -st, False)):
+                out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = c, -s_ * ca, s_ * sa
+                out[:, 0, 3] = self.a[i] * c
+                out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = s_, c * ca, -c * sa
+                out[:, 1, 3] = self.a[i] * s_
+                if const:
+                    out[:, 2, 1], out[:, 2, 2], out[:, 2, 3] = sa, ca, self.d[i]
+                    out[:, 3, 3] = 1.0
+            w, wd = v6[:, i][:, None, None], a6[:, i][:, None, None]
+            Ad = dA * w                                   # dA/dt
+            Add = ddA * w ** 2 + dA * wd                  # d2A/dt2
+            T, T1, T2 = T @ A, T1 @ A + T @ Ad, T2 @ A + 2 * T1 @ Ad + T @ Add
+        return T1[:, :3, 3], T2[:, :3, 3]
+
+
+@dataclass(frozen=True)
+class TcpBand:
+    """Process constraints to check (0 = none): TCP speed ceiling and floor [m/s], the
+    floor away from the rest ends beyond ``ramp_length`` [m] of arc length (the whole path
+    if the plan is periodic), bound on |TCP acceleration| [m/s^2]."""
+
+    speed_max: float = 0.0
+    speed_min: float = 0.0
+    accel_max: float = 0.0
+    ramp_length: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        return bool(self.speed_max > 0 or self.speed_min > 0 or self.accel_max > 0)
+
 
 class MapFriction:
     """Friction torque from a friction-map file's ``joints`` mapping, evaluated here.
@@ -206,6 +275,10 @@ class Verification:
     qdd: np.ndarray = field(repr=False, default=None)
     tau: np.ndarray = field(repr=False, default=None)
     electrical: dict = field(default_factory=dict)
+    tcp_speed_peak: float = float('nan')    # [m/s] as played (NaN: no TcpBand checked)
+    tcp_speed_low: float = float('nan')     # [m/s] lowest away from the rest ends
+    tcp_accel_peak: float = float('nan')    # [m/s^2] largest |TCP acceleration|
+    tcp_floor_ratio: float = float('nan')   # lowest speed / floor (floor rising over ramps)
 
     @property
     def ok(self) -> bool:
@@ -291,7 +364,7 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
                 rigid_torque: Callable, friction: Callable, rest: bool,
                 rate_hz: float = 1000.0, min_samples_per_segment: int = 8,
                 path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6,
-                electrical=None) -> Verification:
+                electrical=None, band: TcpBand | None = None) -> Verification:
     """Check a plan's trajectory message as played (see module docstring).
 
     t (K,) [s]; q, qd, qdd (K, n); profile = (theta, theta_dot, theta_ddot, quadratic): node
@@ -372,5 +445,53 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
         problems.append('non-finite torque')
     energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
     elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
+    tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems)
+           if band is not None and band.active else (np.nan,) * 4)
     return Verification(problems, float(dev.max()), float(worst_time), energy,
-                        float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec)
+                        float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec,
+                        *tcp)
+
+
+def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, rest: bool,
+               problems: list) -> tuple[float, float, float, float]:
+    """The process constraints on the played samples; appends a line per broken one to
+    ``problems`` (worded without ' speed ' / ' torque ': they are not the joint limits whose
+    breach makes the planner add message points). Returns (peak TCP speed, lowest TCP speed
+    away from the rest ends, peak |TCP acceleration|, lowest speed / floor)."""
+    vel, acc = kin.tcp_rates(qs, qds, qdds)
+    speed, amag = np.linalg.norm(vel, axis=1), np.linalg.norm(acc, axis=1)
+    theta = np.clip(circle.theta(kin.tcp(qs)), 0.0, 2 * np.pi)
+    sigma = circle.arc_length(theta)
+    length = float(circle.arc_length(np.array([2 * np.pi]))[0])
+    # the floor: v_min beyond the ramps; over them v_min sqrt(d / ramp), d the distance to
+    # the nearer rest end (a constant-acceleration start or stop reaching v_min at the ramp)
+    frac = (np.clip(np.minimum(sigma, length - sigma) / max(band.ramp_length, 1e-300),
+                    0.0, 1.0) if rest else np.ones(sigma.size))
+    moving = frac >= 1.0
+    low = float(speed[moving].min()) if np.any(moving) else float('nan')
+    floor = band.speed_min * np.sqrt(frac)
+    ramp = (frac > 0) & ~moving
+    ratio = float(np.min(speed[frac > 0] / floor[frac > 0])) if (
+        band.speed_min > 0 and np.any(frac > 0)) else float('nan')
+    if band.speed_max > 0 and speed.max() > band.speed_max * (1 + LIMIT_RTOL):
+        k = int(np.argmax(speed))
+        problems.append(f'tcp_speed_max {band.speed_max:.4g} m/s exceeded: the TCP moves at '
+                        f'{speed[k]:.4g} m/s at t = {ts[k]:.3f} s ({sigma[k] * 1e3:.0f} mm '
+                        'along the path)')
+    if band.speed_min > 0 and np.any(moving) and low < band.speed_min * (1 - LIMIT_RTOL):
+        k = int(np.flatnonzero(moving)[np.argmin(speed[moving])])
+        problems.append(f'tcp_speed_min {band.speed_min:.4g} m/s not kept: the TCP moves at '
+                        f'{speed[k]:.4g} m/s at t = {ts[k]:.3f} s ({sigma[k] * 1e3:.0f} mm '
+                        f'along the path, ramps {band.ramp_length * 1e3:.0f} mm)')
+    if band.speed_min > 0 and np.any(ramp) and np.any(speed[ramp] < floor[ramp]
+                                                        * (1 - LIMIT_RTOL)):
+        k = int(np.flatnonzero(ramp)[np.argmin(speed[ramp] / floor[ramp])])
+        problems.append(f'tcp_speed_min ramp not kept: the TCP moves at {speed[k]:.4g} m/s '
+                        f'{sigma[k] * 1e3:.1f} mm along the path (t = {ts[k]:.3f} s), below '
+                        f'the ramp floor {floor[k]:.4g} m/s')
+    if band.accel_max > 0 and amag.max() > band.accel_max * (1 + LIMIT_RTOL):
+        k = int(np.argmax(amag))
+        problems.append(f'tcp_accel_max {band.accel_max:.4g} m/s^2 exceeded: '
+                        f'|TCP acceleration| {amag[k]:.4g} m/s^2 at t = {ts[k]:.3f} s '
+                        f'({sigma[k] * 1e3:.0f} mm along the path)')
+    return float(speed.max()), low, float(amag.max()), ratio
