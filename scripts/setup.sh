@@ -61,6 +61,13 @@ stamp_src="$MODE $REAL_ROS2 $( { cat "$ROOT/requirements.txt"; \
   find "$ROOT/tools/ros2shim/src" "$ROOT/tools/ros2shim/pyproject.toml" -type f \( -name '*.py' -o -name '*.toml' \) -print0 \
   | sort -z | xargs -0 cat; } | sha256sum)"
 stamp="$(printf '%s' "$stamp_src" | sha256sum | cut -c1-16)"
+# a console script whose interpreter is not this venv's (a venv copied or installed into from
+# another checkout) cannot start: install again
+if [ "$REAL_ROS2" = 0 ] && [ -f "$VENV/bin/ros2" ] \
+   && [ "$(head -n1 "$VENV/bin/ros2")" != "#!$VENV/bin/python" ]; then
+  log "ros2 shim points at $(head -n1 "$VENV/bin/ros2" | cut -c3-): reinstalling it"
+  rm -f "$VENV/.irb-stamp"
+fi
 if [ "$(cat "$VENV/.irb-stamp" 2>/dev/null)" != "$stamp" ]; then
   req="$ROOT/requirements.txt"
   if [ "$MODE" = system ]; then   # keep only the "python" section: ROS comes from /opt/ros

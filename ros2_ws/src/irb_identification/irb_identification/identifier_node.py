@@ -126,6 +126,11 @@ class IdentifierNode(Node):
             self._compute(why)
 
     def _progress(self) -> None:
+        if self.sub is not None and not self.core.received and not self.core.computed:
+            st = (self.core.status or {}).get('state', 'none')
+            self.get_logger().info(
+                f'no message yet on {self.p["topic"]}: {self.sub.get_publisher_count()} '
+                f'publisher(s) matched, replay status {st}')
         if self.core.received and not self.core.computed:
             self.get_logger().info(self.core.progress())
             for line in self.core.segment_progress():

@@ -252,7 +252,9 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
     import os
     import subprocess
     bag, n_msgs, _ = sweep_bag
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    # a domain of its own: a subscriber left on /joint_states by another test of the suite
+    # would satisfy the replay's wait_for_subscribers before the identifier is there
+    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + domain_id % 100), PYTHONUNBUFFERED='1')
     out = tmp_path / 'proc_map.yaml'
     ident = subprocess.Popen(
         ['ros2', 'run', 'irb_identification', 'identifier', '--ros-args', '-p',
@@ -269,7 +271,10 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
         assert replay.returncode == 0, replay.stderr
         # the replay played to our subscriber, not into the void after its wait ran out
         assert 'playing anyway' not in replay.stderr, replay.stderr
-        lines = _read_until(ident, 'wrote', 120)
+        try:
+            lines = _read_until(ident, 'wrote', 120)
+        except AssertionError as exc:     # what the replay saw belongs to the diagnosis
+            raise AssertionError(f'{exc}\nreplay said: {replay.stderr[-2000:]}') from None
         assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
     finally:
         os.killpg(ident.pid, __import__('signal').SIGINT)
