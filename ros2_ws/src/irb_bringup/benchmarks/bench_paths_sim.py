@@ -1,13 +1,15 @@
 """Path error in closed-loop simulation on every path type at gluing/welding TCP speeds.
 
     python ros2_ws/src/irb_bringup/benchmarks/bench_paths_sim.py [--speeds 0.05 0.15 0.25]
-        [--friction file|nominal] [--quick]
+        [--friction file|nominal] [--energy [--band 0.25]] [--paths ...] [--name NAME]
 
 Per path (line, arc in a tilted plane, blended polyline, spline, rectangle with blended
 corners in a tilted plane) and TCP speed v: the planner's trapezoid along arc length with
 cruise speed v (duration L / (0.9 v), 10 % ramps) and, if --energy, the energy-optimal plan
-at that duration; the plan's message turned into pdplus's theta-profile exactly as the plan
-gate does (``profile_from_joint_trajectory``), run by pdplus (``PdPlusController``, PathTracker
+at that duration (with --band b: inside the gluing process band, TCP speed within
+(1 -+ b) x the mean speed beyond 40 mm from start and stop, |TCP acceleration| <= 1 m/s^2, as
+the main job's rectangle); the plan's message turned into pdplus's theta-profile exactly as
+the plan gate does (``profile_from_joint_trajectory``), run by pdplus (``PdPlusController``, PathTracker
 for theta) against the simulated plant (irb_control ``Plant``, config/plant.yaml friction,
 which differs from the nominal model) for the whole motion. Path error: distance of the
 simulated camera's TCP points (100 Hz, 37 um noise) to the path while the controller is in
@@ -27,7 +29,7 @@ from irb_control.profiles import profile_from_joint_trajectory
 from irb_description.model import RobotModel
 from irb_description.path import path_from_spec, path_spec, rectangle_path
 from irb_planning.planner import Planner, PlannerSettings
-from irb_planning.request import PlanRequest
+from irb_planning.request import PlanError, PlanRequest
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 WAY = [[0.55, -0.25, 0.25], [0.8, -0.2, 0.3], [0.85, 0.05, 0.4], [0.7, 0.2, 0.35],
@@ -54,10 +56,20 @@ def plan_request(spec, **kw):
     return PlanRequest(**f, **kw)
 
 
-def run_one(model, planner, name, spec, v, objective, friction_mode, plant_friction):
+def run_one(model, planner, name, spec, v, objective, friction_mode, plant_friction,
+            band=0.0):
     path = path_from_spec(spec)
     T = path.length / (0.9 * v)
-    r = planner.plan(plan_request(spec, objective=objective, duration=T))
+    process = {}
+    if band and objective == 'energy':
+        mean = path.length / T
+        process = dict(tcp_speed_min=(1 - band) * mean, tcp_speed_max=(1 + band) * mean,
+                       tcp_ramp_length=0.04, tcp_accel_max=1.0)
+    try:
+        r = planner.plan(plan_request(spec, objective=objective, duration=T, **process))
+    except PlanError as exc:
+        return {'path': name, 'objective': objective, 'tcp_speed_m_s': v, 'duration_s': T,
+                'completed': False, 'planned': False, 'reason': exc.message, **process}
     tr = r.trajectory
     prof = profile_from_joint_trajectory(model, path, tr['t'], tr['q'], tr['qd'], tr['qdd'])
     ff = controller_friction(model, friction_mode,
@@ -79,7 +91,7 @@ def run_one(model, planner, name, spec, v, objective, friction_mode, plant_frict
             'path_error_mean_mm': float(np.mean(err) * 1e3),
             'path_error_max_mm': float(np.max(err) * 1e3),
             'peak_tcp_speed_m_s': float(v_tcp.max()), 'energy_J': res.energy,
-            'plan_energy_J': r.evaluation.energy}
+            'plan_energy_J': r.evaluation.energy, 'planned': True, **process}
 
 
 def main():
@@ -87,6 +99,8 @@ def main():
     ap.add_argument('--speeds', type=float, nargs='+', default=[0.05, 0.15, 0.25])
     ap.add_argument('--friction', default='file', choices=('file', 'nominal'))
     ap.add_argument('--energy', action='store_true', help='also the energy-optimal plans')
+    ap.add_argument('--band', type=float, default=0.0,
+                    help='energy plans inside a TCP speed band of (1 -+ band) x mean speed')
     ap.add_argument('--paths', nargs='+', default=list(PATHS))
     ap.add_argument('--name', default='paths_sim')
     a = ap.parse_args()
@@ -99,13 +113,17 @@ def main():
         for v in a.speeds:
             for obj in ('trapezoid', 'energy') if a.energy else ('trapezoid',):
                 row = run_one(model, planner, name, PATHS[name], v, obj, a.friction,
-                              plant_friction)
+                              plant_friction, a.band)
                 rows.append(row)
+                if not row['planned']:
+                    print(f"{name:18s} {obj:9s} v={v:.2f} m/s: not planned: {row['reason']}",
+                          flush=True)
+                    continue
                 print(f"{name:18s} {obj:9s} v={v:.2f} m/s: mean {row['path_error_mean_mm']:.4f}"
                       f" mm, max {row['path_error_max_mm']:.4f} mm, done {row['completed']} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
     ok = [r for r in rows if r['completed']]
-    data = {'friction_compensation': a.friction, 'rows': rows,
+    data = {'friction_compensation': a.friction, 'band': a.band, 'rows': rows,
             'worst_mean_mm': max(r['path_error_mean_mm'] for r in ok) if ok else None,
             'worst_max_mm': max(r['path_error_max_mm'] for r in ok) if ok else None,
             'all_completed': len(ok) == len(rows), 'elapsed_s': time.perf_counter() - t0}

@@ -1,18 +1,17 @@
 """realtime_priority / cpu_affinity: applied to every thread when permitted, a warning (never
 an exception) when refused."""
 import os
-import select
 import signal
 import subprocess
 import sys
 import threading
-import time
 import uuid
 
 import pytest
 
 from irb_control import node_util
 from irb_control.node_util import apply_realtime, hold_cpu_latency, process_threads
+from irb_control.process_group import OutputLines
 
 
 class _Log:
@@ -136,14 +135,7 @@ def test_simulator_process_runs_with_the_parameter():
          f'__ns:=/rt{uuid.uuid4().hex[:8]}', '-p', 'realtime_priority:=5'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        line, deadline = '', time.monotonic() + 60.0
-        while 'SCHED_FIFO' not in line and time.monotonic() < deadline:
-            ready, _, _ = select.select([proc.stdout], [], [], deadline - time.monotonic())
-            if not ready:
-                break
-            line = proc.stdout.readline()
-            assert line or proc.poll() is None, 'simulator ended early'
-        assert 'SCHED_FIFO' in line, 'no realtime log line within 60 s'
+        line = OutputLines(proc.stdout).wait_for('SCHED_FIFO', 60.0)[-1]
         if _fifo_permitted():
             assert 'SCHED_FIFO priority 5' in line
             tids = [int(t) for t in os.listdir(f'/proc/{proc.pid}/task')]

@@ -7,15 +7,13 @@ terminal does it: SIGINT to the whole process group (`ros2 run` and the node, on
 """
 import json
 import os
-import select
 import signal
 import socket
 import subprocess
-import time
 import uuid
 
 import pytest
-from irb_control.process_group import stop_sessions
+from irb_control.process_group import OutputLines, stop_sessions
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -40,18 +38,9 @@ def start(exe, *params, ns=None):
 
 def wait_for_line(proc, needle, timeout=60.0):
     """Read the output until a line contains ``needle`` (bounded); the lines read so far."""
-    lines, deadline = [], time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([proc.stdout], [], [], deadline - time.monotonic())
-        if not ready:
-            break
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if needle in line:
-            return lines
-    raise AssertionError(f'no line with {needle!r} within {timeout} s: {"".join(lines)}')
+    if not hasattr(proc, 'lines'):
+        proc.lines = OutputLines(proc.stdout)
+    return proc.lines.wait_for(needle, timeout)
 
 
 def interrupt(proc, times):
@@ -72,7 +61,7 @@ def interrupt(proc, times):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         raise AssertionError('did not stop within 30 s of Ctrl-C')
-    return code, proc.stdout.read()
+    return code, (proc.lines.rest() if hasattr(proc, 'lines') else proc.stdout.read())
 
 
 @pytest.mark.parametrize('times', [1, 2])

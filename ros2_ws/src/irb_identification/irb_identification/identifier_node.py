@@ -24,7 +24,7 @@ from std_srvs.srv import Trigger
 
 from .friction_fit import FitConfig
 from .pipeline import PipelineConfig
-from .rosutil import subscription_qos
+from .rosutil import subscription_qos, take_waiting
 from .sample_fit import SampleFitConfig
 from .segments import SegmentConfig
 from .stream import StreamConfig, StreamIdentifier
@@ -114,6 +114,7 @@ class IdentifierNode(Node):
 
     def _on_msg(self, data: bytes) -> None:
         self.core.add(data, time.time_ns(), time.monotonic())
+        take_waiting(self.sub, lambda d: self.core.add(d, time.time_ns(), time.monotonic()))
 
     def _on_status(self, msg: String) -> None:
         self.core.on_status(msg.data)

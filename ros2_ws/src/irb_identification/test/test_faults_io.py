@@ -5,7 +5,6 @@ The full disk is a small tmpfs mounted for the test (needs root; skipped with th
 otherwise). Processes are started in sessions of their own and interrupted as a terminal does.
 """
 import os
-import select
 import signal
 import subprocess
 import time
@@ -17,6 +16,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from irb_control.process_group import OutputLines  # noqa: E402
 from irb_identification import bagio  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -112,15 +112,15 @@ def test_recorder_process_on_a_full_disk(tiny_disk, ctx):
     second = [x.replace('name:=full', 'name:=second') for x in cmd]
     again = subprocess.Popen(second, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                              text=True, start_new_session=True)
-    out2, deadline = '', time.monotonic() + 60
-    while again.poll() is None and 'recording [' not in out2 and time.monotonic() < deadline:
-        ready, _, _ = select.select([again.stdout], [], [], 0.5)
-        if ready:
-            out2 += again.stdout.readline()
+    lines = OutputLines(again.stdout)
+    try:                                       # it ends with one line, or starts recording
+        lines.wait_for('recording [', 60)
+    except AssertionError:
+        pass
     if again.poll() is None:                   # it started recording after all: stop it
         os.killpg(again.pid, signal.SIGINT)
     code2 = again.wait(timeout=30)
-    out2 += again.stdout.read()
+    out2 = ''.join(lines.lines) + lines.rest()
     assert 'Traceback' not in out2, out2
     assert code2 in (0, 1) and (code2 == 0 or out2.strip().splitlines()[-1].startswith(
         'recorder: ')), out2
@@ -164,13 +164,8 @@ def test_replay_refuses_a_damaged_bag_with_one_line(small_bag):
 def test_ctrl_c_while_playing_is_quiet(small_bag, times):
     # defect 11: a traceback on every stop mid-playback
     proc = _start(['-p', f'bag:={small_bag}', '-p', 'rate:=1.0'])
-    deadline, seen = time.monotonic() + 60, ''
-    while 'playing' not in seen and time.monotonic() < deadline:
-        ready, _, _ = select.select([proc.stdout], [], [], deadline - time.monotonic())
-        if not ready:
-            break
-        seen += proc.stdout.readline()
-    assert 'playing' in seen, seen
+    lines = OutputLines(proc.stdout)
+    lines.wait_for('playing', 60)
     os.killpg(proc.pid, signal.SIGINT)
     if times > 1:
         try:
@@ -178,5 +173,5 @@ def test_ctrl_c_while_playing_is_quiet(small_bag, times):
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGINT)
     code = proc.wait(timeout=30)
-    out = seen + proc.stdout.read()
+    out = ''.join(lines.lines) + lines.rest()
     assert code == 0 and 'Traceback' not in out, out

@@ -8,6 +8,7 @@ decoder), which must agree within 1e-9 when every message arrived.
 import json
 import threading
 import time
+import uuid
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
+from irb_control.process_group import OutputLines  # noqa: E402
 from irb_identification import identify  # noqa: E402
 from irb_identification.bagio import BagWriter, TopicInfo, qos_profile_dict  # noqa: E402
 from irb_identification.identifier_node import IdentifierNode  # noqa: E402
@@ -226,23 +228,6 @@ def test_services_compute_and_reset(ctx, tmp_path):
     assert spin_until(executor, fut.done, 30.0) and fut.result().success
 
 
-def _read_until(proc, needle, timeout):
-    """Lines of ``proc``'s merged output until one holds ``needle`` (select with a bound)."""
-    import select
-    lines, end = [], time.monotonic() + timeout
-    while time.monotonic() < end:
-        ready, _, _ = select.select([proc.stdout], [], [], max(end - time.monotonic(), 0))
-        if not ready:
-            break
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if needle in line:
-            return lines
-    raise AssertionError(f'{needle!r} not seen within {timeout} s: {"".join(lines)[-2000:]}')
-
-
 @pytest.mark.slow
 def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map, tmp_path,
                                                           domain_id):
@@ -252,17 +237,18 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
     import os
     import subprocess
     bag, n_msgs, _ = sweep_bag
-    # a domain of its own: a subscriber left on /joint_states by another test of the suite
-    # would satisfy the replay's wait_for_subscribers before the identifier is there
-    env = dict(os.environ, ROS_DOMAIN_ID=str(100 + domain_id % 100), PYTHONUNBUFFERED='1')
+    # a domain of its own (70..99; the suite's are 50..69): a subscriber left on /joint_states
+    # by another test would satisfy the replay's wait_for_subscribers before the identifier
+    env = dict(os.environ, ROS_DOMAIN_ID=str(70 + domain_id % 30), PYTHONUNBUFFERED='1')
     out = tmp_path / 'proc_map.yaml'
     ident = subprocess.Popen(
         ['ros2', 'run', 'irb_identification', 'identifier', '--ros-args', '-p',
          f'out_map:={out}', '-p', 'joints:=[joint_3]', '-p', 'quiet_period_s:=20.0'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
         start_new_session=True)          # the ros2 launcher and the node: one group
+    output = OutputLines(ident.stdout)
     try:
-        _read_until(ident, 'waiting for publishers', 60)
+        output.wait_for('waiting for publishers', 60)
         replay = subprocess.run(
             ['ros2', 'run', 'irb_identification', 'replay', '--ros-args', '-p', f'bag:={bag}',
              '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'wait_timeout_s:=120.0',
@@ -272,7 +258,7 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
         # the replay played to our subscriber, not into the void after its wait ran out
         assert 'playing anyway' not in replay.stderr, replay.stderr
         try:
-            lines = _read_until(ident, 'wrote', 120)
+            lines = output.wait_for('wrote', 120)
         except AssertionError as exc:     # what the replay saw belongs to the diagnosis
             raise AssertionError(f'{exc}\nreplay said: {replay.stderr[-2000:]}') from None
         assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
@@ -324,3 +310,33 @@ def test_several_bags_as_one_stream(ctx, model, tmp_path):
     for node in (ident, player):
         executor.remove_node(node)
         node.destroy_node()
+
+
+def test_one_callback_takes_every_waiting_message(ctx):
+    """take_waiting: what is queued when the callback runs is taken in that callback, in
+    order, each message once (the identifier's throughput behind a reliable replay)."""
+    from irb_identification.rosutil import take_waiting
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import UInt32
+    context, executor = ctx
+    node = rclpy.create_node(f'drain_{uuid.uuid4().hex[:8]}', context=context)
+    executor.add_node(node)
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     history=HistoryPolicy.KEEP_ALL)
+    topic = f'/drain_{uuid.uuid4().hex[:8]}'
+    got, calls, holder = [], [], {}
+
+    def on_msg(msg):
+        calls.append(len(got))
+        got.append(msg.data)
+        take_waiting(holder['sub'], lambda m: got.append(m.data))
+    pub = node.create_publisher(UInt32, topic, qos)
+    holder['sub'] = node.create_subscription(UInt32, topic, on_msg, qos)
+    assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 30.0)
+    for i in range(200):
+        pub.publish(UInt32(data=i))
+    # published before the executor runs: the first callbacks take what has arrived
+    assert spin_until(executor, lambda: len(got) == 200, 30.0)
+    assert got == list(range(200))
+    assert len(calls) < 200, f'{len(calls)} callbacks for 200 messages'
+    node.destroy_node()
