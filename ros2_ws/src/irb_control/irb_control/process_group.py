@@ -16,61 +16,6 @@ import time
 from dataclasses import dataclass, field
 
 
-class OutputLines:
-    """The lines of a child's text pipe, read by a thread of their own: ``wait_for(needle,
-    timeout)`` returns the lines up to the first one holding ``needle`` (or raises
-    AssertionError with what was read). Polling the pipe with ``select`` and then
-    ``readline`` loses lines: readline buffers every line that arrived with the first, and
-    ``select`` never reports them again (a test waited 120 s for a line already read)."""
-
-    def __init__(self, pipe):
-        import queue
-        self._q: queue.Queue = queue.Queue()
-        self.lines: list[str] = []
-        self._thread = threading.Thread(target=self._pump, args=(pipe,), daemon=True)
-        self._thread.start()
-
-    def _pump(self, pipe) -> None:
-        for line in iter(pipe.readline, ''):
-            self._q.put(line)
-        self._q.put(None)                     # end of output
-
-    def wait_for(self, needle: str, timeout: float) -> list[str]:
-        import queue
-        seen, end = [], time.monotonic() + timeout
-        while (left := end - time.monotonic()) > 0:
-            try:
-                line = self._q.get(timeout=left)
-            except queue.Empty:
-                break
-            if line is None:
-                self._q.put(None)            # stays ended for the next caller
-                break
-            seen.append(line)
-            self.lines.append(line)
-            if needle in line:
-                return seen
-        raise AssertionError(f'{needle!r} not seen within {timeout:g} s: '
-                             f'{"".join(seen)[-2000:]}')
-
-    def rest(self, timeout: float = 30.0) -> str:
-        """Everything until the output ends (bounded)."""
-        self._thread.join(timeout)
-        import queue
-        out = []
-        while True:
-            try:
-                line = self._q.get_nowait()
-            except queue.Empty:
-                break
-            if line is None:
-                self._q.put(None)
-                break
-            out.append(line)
-            self.lines.append(line)
-        return ''.join(out)
-
-
 @dataclass(frozen=True)
 class ProcessSpec:
     """One process: ``name`` for logs, ``cmd`` argv, ``required``: its exit stops the graph."""

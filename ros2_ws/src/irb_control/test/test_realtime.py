@@ -11,7 +11,7 @@ import pytest
 
 from irb_control import node_util
 from irb_control.node_util import apply_realtime, hold_cpu_latency, process_threads
-from irb_control.process_group import OutputLines
+from irb_description.output_lines import OutputLines
 
 
 class _Log:

@@ -13,7 +13,8 @@ import subprocess
 import uuid
 
 import pytest
-from irb_control.process_group import OutputLines, stop_sessions
+from irb_control.process_group import stop_sessions
+from irb_description.output_lines import OutputLines
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

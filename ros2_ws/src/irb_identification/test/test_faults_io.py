@@ -16,7 +16,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from irb_control.process_group import OutputLines  # noqa: E402
+from irb_description.output_lines import OutputLines  # noqa: E402
 from irb_identification import bagio  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

@@ -18,7 +18,7 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from irb_control.process_group import OutputLines  # noqa: E402
+from irb_description.output_lines import OutputLines  # noqa: E402
 from irb_identification import identify  # noqa: E402
 from irb_identification.bagio import BagWriter, TopicInfo, qos_profile_dict  # noqa: E402
 from irb_identification.identifier_node import IdentifierNode  # noqa: E402
