@@ -659,6 +659,11 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
         fix['tcp_speed_max'] = (sreq.tcp_speed_max - (ver.tcp_speed_peak - band.speed_max)
                                 - 1e-3 * band.speed_max)
     if band.speed_min > 0 and ver.tcp_floor_ratio < 1 - LIMIT_RTOL:
+        if not ver.tcp_floor_ratio > 0.25:       # 0 (a stop in the band) or far below
+            raise PlanError(ERROR_SOLVER, 'the played motion falls far below the speed floor '
+                            f'(lowest speed / floor {ver.tcp_floor_ratio:.3g}: ' + '; '.join(
+                                p for p in ver.problems if p.startswith('tcp_'))[:300]
+                            + '): ask for a larger grid_size or a lower tcp_speed_min')
         fix['tcp_speed_min'] = (sreq.tcp_speed_min / ver.tcp_floor_ratio
                                 + 1e-3 * band.speed_min)
     if band.accel_max > 0 and ver.tcp_accel_peak > band.accel_max * (1 + LIMIT_RTOL):

@@ -452,6 +452,11 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
                         *tcp)
 
 
+#: [m] distance from a rest end within which a played sample counts as at rest (the
+#: projection of the TCP at rest onto the path is exact only to round-off)
+REST_SLACK_M = 1e-6
+
+
 def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, rest: bool,
                problems: list) -> tuple[float, float, float, float]:
     """The process constraints on the played samples; appends a line per broken one to
@@ -464,9 +469,12 @@ def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, res
     sigma = circle.arc_length(theta)
     length = float(circle.arc_length(np.array([2 * np.pi]))[0])
     # the floor: v_min beyond the ramps; over them v_min sqrt(d / ramp), d the distance to
-    # the nearer rest end (a constant-acceleration start or stop reaching v_min at the ramp)
-    frac = (np.clip(np.minimum(sigma, length - sigma) / max(band.ramp_length, 1e-300),
-                    0.0, 1.0) if rest else np.ones(sigma.size))
+    # the nearer rest end (a constant-acceleration start or stop reaching v_min at the ramp);
+    # d counted from REST_SLACK_M on: a sample at rest projects onto the path within round-off
+    # of its end, where a floor of v_min sqrt(1e-12 / ramp) > 0 = its speed would be 'broken'
+    d = np.minimum(sigma, length - sigma) - REST_SLACK_M
+    frac = (np.clip(d / max(band.ramp_length, 1e-300), 0.0, 1.0) if rest
+            else np.ones(sigma.size))
     moving = frac >= 1.0
     low = float(speed[moving].min()) if np.any(moving) else float('nan')
     floor = band.speed_min * np.sqrt(frac)

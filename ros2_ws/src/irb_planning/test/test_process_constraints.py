@@ -193,3 +193,24 @@ def test_the_process_block_of_a_path_file(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text(yaml.safe_dump(dict(RECT, process=dict(tcp_speed_max=-1))))
     assert main(['plan', '--path-file', str(bad)]) == 1
+
+
+def test_an_open_line_at_gluing_speed_plans_inside_its_band(planner, model):
+    """Regression (bench_paths_sim --band): on an open line at 0.05 m/s the played sample at
+    rest projected a hair past the path's start, met a ramp floor > 0 at speed 0 and the
+    planner divided by that ratio (ZeroDivisionError instead of a plan)."""
+    ends = np.array([[0.5, -0.2, 0.25], [0.8, 0.25, 0.45]])
+    length = float(np.linalg.norm(ends[1] - ends[0]))
+    mean = 0.9 * 0.05
+    band = dict(tcp_speed_min=0.75 * mean, tcp_speed_max=1.25 * mean, tcp_ramp_length=0.04,
+                tcp_accel_max=1.0)
+    res = planner.plan(PlanRequest(path_type='line', waypoints=ends, duration=length / mean,
+                                   **band))
+    assert res.verification.ok and res.evaluation.ok
+    assert res.verification.tcp_floor_ratio >= 1 - 1e-6
+    ver = res.verification
+    v = np.linalg.norm([model.jacobian(q) @ qd for q, qd in zip(ver.q, ver.qd)], axis=1)
+    s = np.array([np.dot(model.fk(q) - ends[0], ends[1] - ends[0]) / length for q in ver.q])
+    moving = (s >= 0.04) & (s <= length - 0.04)
+    assert v.max() <= band['tcp_speed_max'] * (1 + 1e-6)
+    assert v[moving].min() >= band['tcp_speed_min'] * (1 - 1e-6)
