@@ -7,11 +7,12 @@ Per path (line, arc in a tilted plane, blended polyline, spline, rectangle with 
 corners in a tilted plane) and TCP speed v: the planner's trapezoid along arc length with
 cruise speed v (duration L / (0.9 v), 10 % ramps) and, if --energy, the energy-optimal plan
 at that duration (with --band b: inside the gluing process band, TCP speed within
-(1 -+ b) x the mean speed beyond 40 mm from start and stop, |TCP acceleration| <= 1 m/s^2, as
-the main job's rectangle); the plan's message turned into pdplus's theta-profile exactly as
-the plan gate does (``profile_from_joint_trajectory``), run by pdplus (``PdPlusController``, PathTracker
-for theta) against the simulated plant (irb_control ``Plant``, config/plant.yaml friction,
-which differs from the nominal model) for the whole motion. Path error: distance of the
+(1 -+ b) x the mean speed beyond 40 mm from start and stop, |TCP acceleration| <= 1 m/s^2
+(--accel-max), as the main job's rectangle); the plan's message turned into pdplus's
+theta-profile exactly as the plan gate does (``profile_from_joint_trajectory``), run by pdplus
+(``PdPlusController``, PathTracker for theta) against the simulated plant (irb_control
+``Plant``, config/plant.yaml friction, which differs from the nominal model) for the whole
+motion. Path error: distance of the
 simulated camera's TCP points (100 Hz, 37 um noise) to the path while the controller is in
 PATH mode. Compensation: ``file`` = the plant's own map (what a perfect identification
 gives), ``nominal`` = the model's map. Writes results/paths_sim.json and paths_sim.png.
@@ -57,14 +58,14 @@ def plan_request(spec, **kw):
 
 
 def run_one(model, planner, name, spec, v, objective, friction_mode, plant_friction,
-            band=0.0):
+            band=0.0, accel_max=1.0):
     path = path_from_spec(spec)
     T = path.length / (0.9 * v)
     process = {}
     if band and objective == 'energy':
         mean = path.length / T
         process = dict(tcp_speed_min=(1 - band) * mean, tcp_speed_max=(1 + band) * mean,
-                       tcp_ramp_length=0.04, tcp_accel_max=1.0)
+                       tcp_ramp_length=0.04, tcp_accel_max=accel_max)
     try:
         r = planner.plan(plan_request(spec, objective=objective, duration=T, **process))
     except PlanError as exc:
@@ -101,6 +102,8 @@ def main():
     ap.add_argument('--energy', action='store_true', help='also the energy-optimal plans')
     ap.add_argument('--band', type=float, default=0.0,
                     help='energy plans inside a TCP speed band of (1 -+ band) x mean speed')
+    ap.add_argument('--accel-max', type=float, default=1.0,
+                    help='[m/s^2] |TCP acceleration| bound of --band')
     ap.add_argument('--paths', nargs='+', default=list(PATHS))
     ap.add_argument('--name', default='paths_sim')
     a = ap.parse_args()
@@ -113,7 +116,7 @@ def main():
         for v in a.speeds:
             for obj in ('trapezoid', 'energy') if a.energy else ('trapezoid',):
                 row = run_one(model, planner, name, PATHS[name], v, obj, a.friction,
-                              plant_friction, a.band)
+                              plant_friction, a.band, a.accel_max)
                 rows.append(row)
                 if not row['planned']:
                     print(f"{name:18s} {obj:9s} v={v:.2f} m/s: not planned: {row['reason']}",
@@ -123,7 +126,8 @@ def main():
                       f" mm, max {row['path_error_max_mm']:.4f} mm, done {row['completed']} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
     ok = [r for r in rows if r['completed']]
-    data = {'friction_compensation': a.friction, 'band': a.band, 'rows': rows,
+    data = {'friction_compensation': a.friction, 'band': a.band,
+            'accel_max_m_s2': a.accel_max if a.band else None, 'rows': rows,
             'worst_mean_mm': max(r['path_error_mean_mm'] for r in ok) if ok else None,
             'worst_max_mm': max(r['path_error_max_mm'] for r in ok) if ok else None,
             'all_completed': len(ok) == len(rows), 'elapsed_s': time.perf_counter() - t0}
