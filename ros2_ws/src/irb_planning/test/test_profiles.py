@@ -141,7 +141,8 @@ def test_time_law_is_the_exact_integral_against_quad():
                 continue
         else:
             b0 = rng.uniform(1e-3, 10)
-            a0, a1 = rng.normal() * 10 ** rng.uniform(-6, 1), rng.normal() * 10 ** rng.uniform(-6, 1)
+            a0 = rng.normal() * 10 ** rng.uniform(-6, 1)
+            a1 = rng.normal() * 10 ** rng.uniform(-6, 1)
         kappa = (a1 - a0) / h
 
         def b(x):
