@@ -83,7 +83,8 @@ class PdPlusNode(Node):
             'joint states have been steady for auto_enable_settle_s and torque_command has a '
             'subscriber (once; later motions need ~/enable)')
         par('auto_enable_settle_s', 0.25, 'auto_enable: joint states without a gap of more than '
-            '3 periods for this long first [s] (real time only; 0 with use_sim_time)')
+            '3 periods for this long first, and torque_command subscribed for this long [s] '
+            '(real time only; 0 with use_sim_time)')
         par('watchdog_missed_samples', 3, 'safe stop after this many missing samples')
         par('watchdog_sim_time_timeout_s', 1.0, 'minimum watchdog timeout with use_sim_time '
             '(lockstep) [s]')
@@ -134,6 +135,7 @@ class PdPlusNode(Node):
         # nobody received, and ended in a safe stop)
         self._auto_enable_pending = bool(P['auto_enable'])
         self._settle = SettleGate(0.0 if sim_time else P['auto_enable_settle_s'], cfg.period_s)
+        self._cmd_matched_at: float | None = None     # torque_command first seen subscribed
         self.pub_cmd = self.create_publisher(JointState, 'torque_command', state_pub_qos())
         self.pub_state = self.create_publisher(ControllerState, 'controller_state',
                                               state_pub_qos())
@@ -294,8 +296,17 @@ class PdPlusNode(Node):
         if not self._settle.feed(now) or self.ctrl.profile is None:
             return
         if self.pub_cmd.get_subscription_count() == 0:
+            self._cmd_matched_at = None
             self.get_logger().info('auto_enable: waiting for a subscriber of torque_command',
                                    throttle_duration_sec=5.0)
+            return
+        # the writer sees the subscriber before the subscriber's side has matched this writer:
+        # until then commands are dropped (a CI run: 4 commands of a whole ramp reached the
+        # axis bridge, all late, and the axis computer latched a comm timeout); give the
+        # other side auto_enable_settle_s too
+        if self._cmd_matched_at is None:
+            self._cmd_matched_at = now
+        if now - self._cmd_matched_at < self._settle.settle_s:
             return
         ok, text = self._enable()
         if ok or 'axis' not in text:          # waiting for the axis status keeps it pending
