@@ -61,6 +61,7 @@ class Graph:
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.diag = {}
+        self.logs = {}
         self.node.create_subscription(DiagnosticArray, f'{self.ns}/axis_bridge/status',
                                       self._on_diag, 10)
 
@@ -84,8 +85,15 @@ class Graph:
             self.ex.spin_once(timeout_sec=0.02)
         return True
 
+    def stop_all(self) -> str:
+        """Stop every process; their output, last 1500 characters each (for a failure's
+        message: what the nodes said is the diagnosis)."""
+        self.logs.update({n: stop(p) for n, p in self.procs.items() if n not in self.logs})
+        return '\n'.join(f'--- {n}:\n{log[-1500:]}' for n, log in self.logs.items())
+
     def close(self):
-        logs = {n: stop(p) for n, p in self.procs.items()}
+        self.stop_all()
+        logs = self.logs
         self.ex.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.ctx)
@@ -129,8 +137,9 @@ def test_pdplus_runs_unchanged_against_the_bridge(graph):
     states = []
     graph.node.create_subscription(ControllerState, f'{graph.ns}/controller_state',
                                    states.append, state_qos())
-    assert graph.wait(lambda: any(s.mode == ControllerState.MODE_PATH for s in states), 90), \
-        f'pdplus never reached the path through the bridge: {_modes(states)}, {graph.diag}'
+    if not graph.wait(lambda: any(s.mode == ControllerState.MODE_PATH for s in states), 90):
+        raise AssertionError(f'pdplus never reached the path through the bridge: '
+                             f'{_modes(states)}, {graph.diag}\n{graph.stop_all()}')
     assert graph.wait(lambda: int(graph.diag.get('commands_sent', 0)) > 400, 60)
     assert graph.diag['axis_error'] == '0' and graph.diag['link_up'] == 'True', \
         f'{graph.diag}, {_modes(states)}'
