@@ -141,8 +141,12 @@ def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state():
                             '-p', 'command_timeout_s:=0.04032'],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
+    # pdplus's watchdog at 10 samples (40 ms): with 3, a platform stall during the ramp
+    # latched a correct stop before the freeze in a fresh-clone suite run (modes 4, 4, 4 ...);
+    # a 1 s freeze trips either, and its own stall detection is unchanged
     ctrl = subprocess.Popen(['ros2', 'run', 'irb_control', 'pdplus', *common,
-                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=false'],
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=false',
+                             '-p', 'watchdog_missed_samples:=10'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     ctx = rclpy.Context()
