@@ -27,18 +27,26 @@ class OutputLines:
             self._q.put(line)
         self._q.put(None)                     # end of output
 
+    def _next(self, timeout: float) -> str | None:
+        """The next line (kept in ``lines``), or None when the output has ended or nothing
+        came within ``timeout`` [s] (0: only what is already there)."""
+        try:
+            line = self._q.get(timeout=timeout) if timeout > 0 else self._q.get_nowait()
+        except queue.Empty:
+            return None
+        if line is None:
+            self._q.put(None)                 # stays ended for the next caller
+            return None
+        self.lines.append(line)
+        return line
+
     def wait_for(self, needle: str, timeout: float) -> list[str]:
         seen, end = [], time.monotonic() + timeout
         while (left := end - time.monotonic()) > 0:
-            try:
-                line = self._q.get(timeout=left)
-            except queue.Empty:
-                break
+            line = self._next(left)
             if line is None:
-                self._q.put(None)            # stays ended for the next caller
                 break
             seen.append(line)
-            self.lines.append(line)
             if needle in line:
                 return seen
         raise AssertionError(f'{needle!r} not seen within {timeout:g} s: '
@@ -48,14 +56,6 @@ class OutputLines:
         """Everything until the output ends (bounded)."""
         self._thread.join(timeout)
         out = []
-        while True:
-            try:
-                line = self._q.get_nowait()
-            except queue.Empty:
-                break
-            if line is None:
-                self._q.put(None)
-                break
+        while (line := self._next(0)) is not None:
             out.append(line)
-            self.lines.append(line)
         return ''.join(out)

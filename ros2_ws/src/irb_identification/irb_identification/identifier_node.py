@@ -113,8 +113,10 @@ class IdentifierNode(Node):
                                f'{qos.history.name.lower()}, depth {qos.depth})')
 
     def _on_msg(self, data: bytes) -> None:
-        self.core.add(data, time.time_ns(), time.monotonic())
-        take_waiting(self.sub, lambda d: self.core.add(d, time.time_ns(), time.monotonic()))
+        def add(raw: bytes) -> None:
+            self.core.add(raw, time.time_ns(), time.monotonic())
+        add(data)
+        take_waiting(self.sub, add)             # and what queued behind it
 
     def _on_status(self, msg: String) -> None:
         self.core.on_status(msg.data)
