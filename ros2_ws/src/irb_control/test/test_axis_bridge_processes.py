@@ -116,16 +116,28 @@ def _modes(states):
     return out
 
 
-def test_pdplus_runs_unchanged_against_the_bridge(graph):
+def test_pdplus_runs_unchanged_against_the_bridge(stall_retries):
     # This test is about the data path (UDP <-> ROS, sequence echo, pdplus unchanged), not
     # about the timing limits: on this shared 2-vCPU VM the bare rclpy echo between two
     # processes had stalls of up to 17 ms on an idle machine (echo_floor.py, 2026-11-24), and
     # the 3-cycle limits then stopped the robot correctly in 2 of 3 quiet runs. The limits
-    # are 10 cycles here; the 3-cycle reactions are tested in the fault test below and in the
-    # cores' tests, and their rate is measured by bench_safety.py soak. 10 cycles were not
-    # enough either: 3 of 4 fresh-clone suite runs on 2026-11-24 ended in a correct latched
-    # stop from a stall of more than 10 cycles before or during the path (one run: a 43.6 ms
-    # gap in joint states). 25 cycles (~100 ms) here; the data path is the subject.
+    # are 25 cycles (~100 ms) here; the 3-cycle reactions are tested in the fault test below
+    # and in the cores' tests, and their rate is measured by bench_safety.py soak. A CI VM
+    # stalled 332 ms once: a stop from the watchdog or the axis computer's comm timeout is
+    # the correct reaction, and the scenario then runs again on fresh processes
+    # (stall_retries); any other stop fails at once.
+    stall_retries(lambda: _data_path_once(stall_retries))
+
+
+def _data_path_once(retries):
+    graph = Graph()
+    try:
+        _data_path(graph, retries)
+    finally:
+        graph.close()
+
+
+def _data_path(graph, retries):
     graph.start('axis', 'fake_axis_computer', 'miss_limit:=25')
     graph.start('bridge', 'axis_bridge')
     # auto_enable starts the ramp once the joint states have been steady for
@@ -140,10 +152,23 @@ def test_pdplus_runs_unchanged_against_the_bridge(graph):
     states = []
     graph.node.create_subscription(ControllerState, f'{graph.ns}/controller_state',
                                    states.append, state_qos())
-    if not graph.wait(lambda: any(s.mode == ControllerState.MODE_PATH for s in states), 90):
+
+    def stalled():
+        """A stop by the watchdog, or the axis computer's comm-timeout latch: the machine."""
+        stops = [s.stop_reason for s in states if s.mode == ControllerState.MODE_STOPPED]
+        if (stops and retries.is_stall(stops[0])) or graph.diag.get('axis_error') == '1':
+            raise retries.Stall(f'{_modes(states)}, axis_error {graph.diag.get("axis_error")}')
+    reached = (ControllerState.MODE_PATH, ControllerState.MODE_STOPPED)
+    graph.wait(lambda: any(s.mode in reached for s in states), 90)    # a stop ends the wait
+    if not any(s.mode == ControllerState.MODE_PATH for s in states):
+        stalled()
         raise AssertionError(f'pdplus never reached the path through the bridge: '
                              f'{_modes(states)}, {graph.diag}\n{graph.stop_all()}')
-    assert graph.wait(lambda: int(graph.diag.get('commands_sent', 0)) > 400, 60)
+    if not graph.wait(lambda: int(graph.diag.get('commands_sent', 0)) > 400, 60):
+        stalled()
+        raise AssertionError(f'fewer than 400 commands sent: {graph.diag}, {_modes(states)}')
+    if graph.diag['axis_error'] != '0' or states[-1].mode != ControllerState.MODE_PATH:
+        stalled()
     assert graph.diag['axis_error'] == '0' and graph.diag['link_up'] == 'True', \
         f'{graph.diag}, {_modes(states)}'
     last = states[-1]

@@ -127,11 +127,18 @@ def test_robot_follows_circle_across_processes(processes):
     assert ctrl.wait(timeout=20) == 0, ctrl.stdout.read()
 
 
-def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state():
+def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state(stall_retries):
     """pdplus frozen for 1 s (SIGSTOP) in the middle of the path, then resumed: it must end
     in a latched stop (its own stall or the watchdog) and never answer the states that waited
     in its queue (issue 14, defect 3: it resumed silently in 5 of 7 runs, answering old
-    states). Real time: simulator and pdplus on the steady clock."""
+    states). Real time: simulator and pdplus on the steady clock. A stop from a stall of the
+    machine before the freeze (the fresh-clone CI run of 2026-11-24: modes 4, 4, 4 with a
+    40 ms watchdog) is correct but not the subject: the scenario runs again on fresh
+    processes (stall_retries)."""
+    stall_retries(lambda: _stall_once(stall_retries))
+
+
+def _stall_once(retries):
     from std_srvs.srv import Trigger
     ns = f'/st{uuid.uuid4().hex[:8]}'
     common = ['--ros-args', '-r', f'__ns:={ns}']
@@ -174,8 +181,13 @@ def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state():
         assert until(lambda: bool(states), 60), 'no controller state'
         res = enable_when_ready(ex, enable)
         assert res.success, res
-        assert until(lambda: states[-1].mode == ControllerState.MODE_PATH, 30), \
-            [s.mode for s in states[-5:]]
+        reached = (ControllerState.MODE_PATH, ControllerState.MODE_STOPPED)
+        if not until(lambda: states[-1].mode in reached, 30) \
+                or states[-1].mode != ControllerState.MODE_PATH:
+            stops = [s.stop_reason for s in states if s.mode == ControllerState.MODE_STOPPED]
+            if stops and retries.is_stall(stops[0]):
+                raise retries.Stall(f'before the freeze: {stops[0]}')
+            raise AssertionError([(s.mode, s.stop_reason) for s in states[-5:]])
         os.killpg(ctrl.pid, signal.SIGSTOP)
         t_stop = time.monotonic()
         try:
