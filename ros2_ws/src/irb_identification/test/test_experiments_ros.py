@@ -17,7 +17,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from irb_identification import bagio  # noqa: E402
-from irb_identification.run_timing import (MODE_HOLD, MODE_RAMP, MODE_STOPPED, MODE_TIME,  # noqa: E402
+from irb_identification.run_timing import (MODE_HOLD, MODE_RAMP,  # noqa: E402
+                                           MODE_STOPPED, MODE_TIME,
                                            controller_state_head, header_stamp)
 
 pytestmark = pytest.mark.ros

@@ -51,6 +51,8 @@ class WorkflowConfig:
     bic_threshold: float = 30.0
     min_confidence: float = 0.6
     min_fit_reduction: float = 0.25
+    min_excess_reduction: float = 0.5
+    min_excess: float = 0.5
     n_boot: int = 40
     seed: int = 0
     speed_bins: tuple = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 3.0)
@@ -69,7 +71,8 @@ class WorkflowConfig:
         res = ResidualConfig(**d.get('residual', {}))
         grids = Grids(**{k: tuple(v) if isinstance(v, list) else v
                          for k, v in d.get('grids', {}).items()})
-        keys = ('block_s', 'bic_threshold', 'min_confidence', 'min_fit_reduction', 'n_boot',
+        keys = ('block_s', 'bic_threshold', 'min_confidence', 'min_fit_reduction',
+                'min_excess_reduction', 'min_excess', 'n_boot',
                 'seed', 'heldout_threshold', 'max_effects', 'unexplained_ratio',
                 'noise_floor')
         kw = {k: d[k] for k in keys if k in d}
@@ -457,8 +460,13 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
         return nt
 
     check = plausibility_check(model, fm, record_s, stroke, known.blocks)
-    dec = Decision(config.bic_threshold, config.heldout_threshold, config.min_confidence,
-                   config.min_fit_reduction, config.n_boot, config.seed, config.max_effects)
+    dec = Decision(bic_threshold=config.bic_threshold,
+                   heldout_threshold=config.heldout_threshold,
+                   min_confidence=config.min_confidence,
+                   min_fit_reduction=config.min_fit_reduction,
+                   min_excess_reduction=config.min_excess_reduction,
+                   min_excess=config.min_excess, n_boot=config.n_boot, seed=config.seed,
+                   max_terms=config.max_effects)
     if log:
         log(f'{len(runs)} runs, {len(B.keys)} channel blocks, fit/held-out time blocks '
             f'{len(fit_blocks)}/{len(hold_blocks)}')
@@ -685,7 +693,10 @@ def _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_b
         'decision': {'bic_threshold': config.bic_threshold,
                      'heldout_threshold': config.heldout_threshold,
                      'min_confidence': config.min_confidence,
-                     'min_fit_reduction': config.min_fit_reduction, 'n_boot': config.n_boot,
+                     'min_fit_reduction': config.min_fit_reduction,
+                     'min_excess_reduction': config.min_excess_reduction,
+                     'min_excess': config.min_excess, 'n_boot': config.n_boot,
+                     'measured_white_noise': {_cb_name(cb): v for cb, v in B.white.items()},
                      'unexplained_ratio': config.unexplained_ratio},
         'units': {'torque': 'N m', 'tcp': 'm', 'command': 'N m', 'delta_bic': '-'},
     }
