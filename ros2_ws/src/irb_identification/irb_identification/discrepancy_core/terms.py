@@ -95,9 +95,18 @@ def white_noise_rms(r: np.ndarray) -> float:
     (MAD) spread of the second differences / sqrt(6), pooled over the axes. A smooth error
     leaves almost nothing in second differences; the few samples at run boundaries and
     backlash flips are outliers the median ignores (measured on the bench's TCP residuals:
-    36-38 um against 37 um simulated, with effects of 1-2.7 x the noise in them)."""
+    36-38 um against 37 um simulated, with effects of 1-2.7 x the noise in them).
+    NaN (not measured) unless the noise is white at the sample rate: first differences of
+    white noise have a lag-1 correlation of -0.5, of a filtered camera's noise (AR(1), rho)
+    -(1 - rho) / 2, whose second differences would read low by sqrt((3 - rho) (1 - rho) / 3)
+    (-29 % at rho 0.5) and make the excess test permissive; outside -0.5 +- 0.1 it is off."""
     r = np.asarray(r, float)
     if len(r) < 8:
+        return float('nan')
+    d1 = np.diff(r, axis=0)
+    d1 = d1 - np.median(d1, axis=0)
+    lag1 = np.sum(d1[1:] * d1[:-1], axis=0) / np.maximum(np.sum(d1 ** 2, axis=0), 1e-300)
+    if np.any(np.abs(lag1 + 0.5) > 0.1):
         return float('nan')
     d2 = r[2:] - 2.0 * r[1:-1] + r[:-2]
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) * 1.4826 / np.sqrt(6.0)
