@@ -18,6 +18,9 @@ from irb_identification.bagio import read_messages, typestore
 from irb_identification.series import read_joint_series
 
 CONTROLLER_STATE = 'irb_interfaces/msg/ControllerState'
+#: [s] the largest gap between recorded samples (4.032 ms apart) a run's path phase may have:
+#: above, the recorder lost samples (a stall longer than the writers' 1 s keep-last history)
+MAX_SAMPLE_GAP_S = 0.05
 
 
 @dataclass
@@ -55,13 +58,30 @@ def _stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def run_figures(bag: str | Path, label: str, center: np.ndarray | None = None,
-                radius: float | None = None, path=None) -> RunFigures:
-    """Figures of the path phase of one run on the circle (center, radius) or on ``path``
-    (an irb_description path); raises ValueError if the bag has no path phase."""
+def largest_gap(t: np.ndarray, t0: float, t1: float) -> tuple[float, float]:
+    """(largest gap [s], where it starts [s]) between the sorted stamps ``t`` in [t0, t1]."""
+    t = np.sort(np.asarray(t, float))
+    t = t[(t >= t0 - 1e-9) & (t <= t1 + 1e-9)]
+    if t.size < 2:
+        return float(t1 - t0), float(t0)
+    d = np.diff(t)
+    return float(d.max()), float(t[np.argmax(d)])
+
+
+def check_gap(t: np.ndarray, t0: float, t1: float, what: str, bag) -> None:
+    """ValueError if the stamps ``t`` of ``what`` have a gap > MAX_SAMPLE_GAP_S in [t0, t1]."""
+    gap, at = largest_gap(t, t0, t1)
+    if gap > MAX_SAMPLE_GAP_S:
+        raise ValueError(f'bag {bag}: {what} misses {gap:.3f} s of samples from t = {at:.3f} s '
+                         '(the recorder fell behind): figures of it would be wrong')
+
+
+def path_window(bag: str | Path) -> tuple[float, float]:
+    """(first, last) stamp [s] of the controller in MODE_PATH in a run's bag; ValueError if
+    the bag has no path phase, ends before the controller finished it, or misses the
+    controller states at either end of the path phase (the window would be wrong)."""
     store = typestore([CONTROLLER_STATE])
-    raw = read_messages(bag, ['/controller_state', '/camera/tcp'])
-    ctrl = raw['/controller_state']
+    ctrl = read_messages(bag, ['/controller_state'])['/controller_state']
     states = [store.deserialize_cdr(d, ctrl.msgtype) for d in ctrl.data]
     t_path = np.array([_stamp(m) for m in states if m.mode == MODE_PATH])
     if t_path.size < 2:
@@ -71,8 +91,29 @@ def run_figures(bag: str | Path, label: str, center: np.ndarray | None = None,
         # less energy): refuse them
         raise ValueError(f'bag {bag}: ends before the controller finished the path (no '
                          'MODE_HOLD after MODE_PATH: the recorder stopped early or fell behind)')
-    t0, t1 = t_path.min(), t_path.max()
+    t0, t1 = float(t_path.min()), float(t_path.max())
+    # a hold after a gap hides a lap cut short just as well (run 20261124_235759: the last
+    # 0.5 s of the path lost in a 1 s recorder stall, "5.49 s" and 30 % less energy)
+    stamps = np.array([_stamp(m) for m in states])
+    t_hold = stamps[np.array([m.mode == MODE_HOLD for m in states]) & (stamps > t1)].min()
+    t_before = stamps[stamps < t0].max() if np.any(stamps < t0) else -np.inf
+    for a, b, end in ((t_before, t0, 'start'), (t1, t_hold, 'end')):
+        if b - a > MAX_SAMPLE_GAP_S:
+            raise ValueError(f'bag {bag}: /controller_state misses {b - a:.3f} s of samples at '
+                             f'the {end} of the path phase (the recorder fell behind): its '
+                             'figures would be wrong')
+    return t0, t1
+
+
+def run_figures(bag: str | Path, label: str, center: np.ndarray | None = None,
+                radius: float | None = None, path=None) -> RunFigures:
+    """Figures of the path phase of one run on the circle (center, radius) or on ``path``
+    (an irb_description path); raises ValueError if the bag has no path phase."""
+    store = typestore([CONTROLLER_STATE])
+    raw = read_messages(bag, ['/camera/tcp'])
+    t0, t1 = path_window(bag)
     js = read_joint_series(bag)
+    check_gap(js.t, t0, t1, '/joint_states', bag)
     inside = (js.t >= t0) & (js.t <= t1)
     tau, qd = js.effort[inside], js.velocity[inside]
     t = js.t[inside] - t0

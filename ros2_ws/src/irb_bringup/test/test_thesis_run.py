@@ -2,6 +2,7 @@
 import json
 import os
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -79,6 +80,109 @@ def test_the_configured_gluing_band_holds_for_the_trapezoid(tmp_path, section):
     assert r.verification.tcp_accel_peak <= band['tcp_accel_max']
 
 
+def test_duty_cycle_figures_and_checks():
+    """Per year = per cycle x cycles per hour x hours per year, in kWh (3.6 MJ) and cost; a
+    duty cycle that does not fit an hour, or a malformed one, is refused with a reason."""
+    from irb_bringup.energy_report import check_duty, per_year
+    duty = {'cycles_per_hour': 180, 'hours_per_year': 4000, 'price_per_kwh': 0.2}
+    y = per_year(3600.0, duty)              # 3.6 kJ = 1e-3 kWh per cycle
+    assert y['cycle_kwh'] == pytest.approx(1e-3, rel=1e-12)
+    assert y['year_kwh'] == pytest.approx(1e-3 * 180 * 4000, rel=1e-12)
+    assert y['year_cost'] == pytest.approx(0.2 * 720.0, rel=1e-12)
+    check_duty(duty, 20.0)                  # 180 x 20 s = 1 h exactly
+    with pytest.raises(ValueError, match='do not fit in an hour'):
+        check_duty(duty, 20.1)
+    with pytest.raises(ValueError, match='price_per_kwh'):
+        check_duty({**duty, 'price_per_kwh': -1}, 10.0)
+    with pytest.raises(ValueError, match='8760'):
+        check_duty({**duty, 'hours_per_year': 9000}, 10.0)
+
+
+@pytest.mark.parametrize('section', ['full', 'quick'])
+def test_the_configured_energy_story(section):
+    """The config's region is the stated box around the thesis centre (0.4 x 0.8 x 0.6 m),
+    the full grid has the thesis centre on it, the duty cycle fits an hour."""
+    import numpy as np
+    import yaml
+    from irb_planning.placement import Region
+
+    from irb_bringup.energy_report import check_duty
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
+                          / 'thesis_run.yaml').read_text())[section]
+    pl = cfg['placement']
+    lo, hi = np.array(pl['lo_m']), np.array(pl['hi_m'])
+    Region(lo, hi)
+    np.testing.assert_allclose(hi - lo, [0.4, 0.8, 0.6], atol=1e-12)
+    np.testing.assert_allclose(0.5 * (lo + hi), cfg['center_m'], atol=1e-12)
+    if section == 'full':
+        axes = [np.linspace(lo[d], hi[d], pl['n'][d]) for d in range(3)]
+        assert all(np.any(np.isclose(a, c)) for a, c in zip(axes, cfg['center_m']))
+    check_duty(cfg['duty_cycle'], float(cfg['circle_duration_s']))
+
+
+def test_gap_in_a_recorded_path_phase_is_refused():
+    """A lap whose end the recorder lost (stall longer than the writers' history) must not be
+    measured: the gap check names it."""
+    import numpy as np
+
+    from irb_bringup.run_report import MAX_SAMPLE_GAP_S, check_gap, largest_gap
+    t = np.arange(0, 6, 0.004032)
+    check_gap(t, 0.5, 5.5, 'x', 'bag')
+    cut = t[(t < 4.0) | (t > 4.0 + 2 * MAX_SAMPLE_GAP_S)]
+    gap, at = largest_gap(cut, 0.5, 5.5)
+    assert gap > 2 * MAX_SAMPLE_GAP_S and at == pytest.approx(4.0, abs=0.005)
+    with pytest.raises(ValueError, match='misses'):
+        check_gap(cut, 0.5, 5.5, '/controller_state', 'bag')
+
+
+def test_placement_outside_the_workspace_is_reported_not_raised(tmp_path):
+    """A region nowhere reachable gives the placement block an error and the count of
+    refused points (every one), no traceback and no plot; the report section says so."""
+    from irb_bringup.energy_report import placement_section, placement_study
+    cfg = {'center_m': [0.6, 0.0, 0.13], 'radius_m': 0.15, 'circle_duration_s': 10.0,
+           'planner_grid': 40, 'electrical_objective': False,
+           'placement': {'lo_m': [2.0, 2.0, 2.0], 'hi_m': [2.2, 2.0, 2.0], 'n': [2, 1, 1],
+                         'coarse_grid': 20, 'refine': 1, 'min_step_m': 0.2,
+                         'energy_model': 'mechanical'}}
+    out = placement_study(cfg, '', tmp_path, lambda s: None, 'shared')
+    assert out['unreachable'] == out['grid_points'] == 2
+    assert 'no reachable placement' in out['error'] and 'best' not in out
+    assert not (tmp_path / 'placement.png').exists()
+    text = '\n'.join(placement_section(out, None, str))
+    assert '**No placement found: no reachable placement in the region' in text
+    assert text.count('- [2.') == 2          # both refused points with their reason
+
+
+def _stamps(msgs):
+    import numpy as np
+    return np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in msgs])
+
+
+def _bag_electrical_energy(bag, power_bag):
+    """Independent of the report's code: the path window (first to last MODE_PATH controller
+    state of the run's bag) and the trapezoidal integral of each total_<mode> of
+    /electrical_power (the run's power bag) there."""
+    import numpy as np
+    from irb_identification.bagio import read_messages, typestore
+    store = typestore(['irb_interfaces/msg/ControllerState', 'sensor_msgs/msg/JointState'])
+    raw = read_messages(bag, ['/controller_state'])
+    raw.update(read_messages(power_bag, ['/electrical_power']))
+    cs = [store.deserialize_cdr(d, raw['/controller_state'].msgtype)
+          for d in raw['/controller_state'].data]
+    tp = _stamps([m for m in cs if m.mode == 2])          # MODE_PATH
+    pw = [store.deserialize_cdr(d, raw['/electrical_power'].msgtype)
+          for d in raw['/electrical_power'].data]
+    t = _stamps(pw)
+    o = np.argsort(t)
+    sel = [o[k] for k in range(o.size) if tp.min() <= t[o[k]] <= tp.max()]
+    out = {}
+    for mode in ('none', 'shared', 'regenerative'):
+        p = np.array([pw[i].effort[list(pw[i].name).index(f'total_{mode}')] for i in sel])
+        tt = t[sel]
+        out[mode] = float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(tt)))
+    return out
+
+
 def test_quick_pipeline_end_to_end(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     res = subprocess.run(['ros2', 'run', 'irb_bringup', 'thesis_run', '--quick',
@@ -90,14 +194,16 @@ def test_quick_pipeline_end_to_end(tmp_path):
     out = runs[0]
     report = (out / 'report.md').read_text()
     for heading in ('## Energy', '## Path accuracy', '## Identified friction', '## Planner',
-                    '## Gluing contour', '## Bags'):
+                    '## Gluing contour', '## Electrical energy', '## Best placement',
+                    '## Per cycle and per year', '## Bags'):
         assert heading in report
     for png in ('plots/power.png', 'plots/path_error.png', 'plots/torques_speeds.png',
-                'plots/plan.png'):
+                'plots/plan.png', 'plots/electrical_power.png', 'plots/placement.png'):
+        assert f']({png})' in report, png
         assert (out / png).stat().st_size > 10_000, png
     s = json.loads((out / 'summary.json').read_text())
     for run in ('energy_ff', 'trapezoid_ff', 'energy_noff', 'rect_energy_ff',
-                'rect_trapezoid_ff'):
+                'rect_trapezoid_ff', 'best_energy_ff'):
         assert s[run]['energy_j'] > 0
         assert (tmp_path / 'bags' / f'{out.name}_{run}' / 'metadata.yaml').is_file()
         # each run is one lap of the planned duration (no second lap, no stall)
@@ -124,3 +230,60 @@ def test_quick_pipeline_end_to_end(tmp_path):
     # equal duration, and the optimum is not worse than the baseline beyond tracking noise
     assert s['energy_saving_percent'] > -2
     assert (out / 'friction_map.yaml').is_file()
+    # --- the energy story (issue 17 item 6) ---
+    import yaml
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
+                          / 'thesis_run.yaml').read_text())['quick']
+    elec = s['electrical_energy_j']
+    for run in ('energy_ff', 'trapezoid_ff', 'best_energy_ff'):
+        # the bag's electrical_power integrated here, not by the report's function
+        assert s['electrical_power_bags'][run] == s[run]['bag'] + '_drive'
+        own = _bag_electrical_energy(s[run]['bag'], s['electrical_power_bags'][run])
+        for mode, e in own.items():
+            assert elec[run][mode] == pytest.approx(e, rel=1e-9), (run, mode)
+        # motoring-only bus: the grid pays every loss and the standby on top of the work
+        assert elec[run]['none'] > s[run]['energy_j']
+        assert elec[run]['none'] >= elec[run]['shared'] - 1e-9 >= \
+            elec[run]['regenerative'] - 2e-9
+        assert s['electrical_standby_j'][run] == pytest.approx(
+            270.0 * s[run]['duration_s'], rel=0.01)
+    mode = s['plant_bus_mode']
+    # per cycle: the window's standby replaced by standby over the planned duration
+    cycle = {run: elec[run][mode] - s['electrical_standby_j'][run] + 270.0 * 6.0
+             for run in ('energy_ff', 'trapezoid_ff', 'best_energy_ff')}
+    for run, e in cycle.items():
+        assert s['electrical_cycle_j'][run][mode] == pytest.approx(e, rel=1e-12)
+    assert s['electrical_saving_percent'][mode] == pytest.approx(
+        saving_percent(cycle['energy_ff'], cycle['trapezoid_ff']), rel=1e-12)
+    # planned figures for both models: electrical above mechanical for every plan
+    for name, v in s['planned_energy_j'].items():
+        assert v['none'] > v['mechanical'], name
+    # placement: the region's grid, unreachable points counted, the best centre inside the
+    # box and not worse than the optimal timing at the thesis placement on the same theta grid
+    p = s['placement']
+    assert 'error' not in p and p['grid_points'] == 8
+    assert 0 <= p['unreachable'] < p['grid_points']
+    assert len(p['reasons']) == p['unreachable']
+    assert all(lo - 1e-9 <= c <= hi + 1e-9 for lo, c, hi in zip(
+        p['region_lo_m'], p['best']['center_m'], p['region_hi_m']))
+    assert p['best']['mechanical'] <= p['optimal_thesis']['mechanical'] + 1e-9
+    assert p['best']['search_energy_j'] == pytest.approx(p['best']['mechanical'], rel=1e-12)
+    assert p['optimal_thesis']['mechanical'] <= p['trapezoid_thesis']['mechanical'] * 1.001
+    assert p['executed']['bag'] == s['best_energy_ff']['bag']
+    assert p['executed']['electrical'] == pytest.approx(cycle['best_energy_ff'])
+    # per cycle and per year: per year = per cycle x cycles per hour x hours per year
+    duty = s['duty_cycle']
+    k = cfg['duty_cycle']['cycles_per_hour'] * cfg['duty_cycle']['hours_per_year']
+    runs = {'trapezoid, thesis placement': 'trapezoid_ff',
+            'energy-optimal timing, thesis placement': 'energy_ff',
+            'energy-optimal timing, best placement': 'best_energy_ff'}
+    assert set(duty['rows']) == set(runs)
+    for name, run in runs.items():
+        row = duty['rows'][name]
+        assert row['electrical']['cycle_j'] == pytest.approx(cycle[run], rel=1e-12)
+        assert row['mechanical']['cycle_j'] == pytest.approx(s[run]['energy_j'], rel=1e-12)
+        for key in ('electrical', 'mechanical'):
+            assert row[key]['year_kwh'] == pytest.approx(row[key]['cycle_j'] / 3.6e6 * k,
+                                                         rel=1e-12)
+            assert row[key]['year_cost'] == pytest.approx(
+                row[key]['year_kwh'] * cfg['duty_cycle']['price_per_kwh'], rel=1e-12)
