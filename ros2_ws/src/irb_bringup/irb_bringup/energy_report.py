@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from irb_description.electrical import BUS_MODES
 
 from .run_report import check_gap, path_window, saving_percent
 
-BUS_MODES = ('none', 'shared', 'regenerative')
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 J_PER_KWH = 3.6e6
 
@@ -279,10 +279,10 @@ def duty_section(duty: dict, rows: list[tuple], measure: str) -> list[str]:
 
 def plan_figures(result) -> dict:
     """{'mechanical': J, 'none': J, 'shared': J, 'regenerative': J} of a PlanResult, from
-    its independent check of the trajectory as played."""
-    ver = result.verification
-    return {'mechanical': float(ver.energy),
-            **{m: float(ver.electrical[f'total_{m}']) for m in BUS_MODES}}
+    its independent check of the trajectory as played (placement.plan_energy per model)."""
+    from irb_planning.placement import plan_energy
+    return {'mechanical': plan_energy(result, 'mechanical'),
+            **{m: plan_energy(result, f'electrical_{m}') for m in BUS_MODES}}
 
 
 def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progress,

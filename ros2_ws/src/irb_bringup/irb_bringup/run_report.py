@@ -9,6 +9,7 @@ gluing rectangle, by the path's own projection, irb_description.path).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -177,6 +178,13 @@ def plot_runs(runs: list[RunFigures], out_dir: Path) -> dict[str, str]:
     return files
 
 
+def link_path(p, base: Path) -> str:
+    """``p`` as a Markdown link from a file in ``base``: relative (POSIX) when inside it,
+    else as it is."""
+    p, base = Path(p).resolve(), Path(base).resolve()
+    return p.relative_to(base).as_posix() if p.is_relative_to(base) else str(p)
+
+
 def saving_percent(optimal: float, baseline: float) -> float:
     """Energy saved by ``optimal`` relative to ``baseline`` [%]."""
     return 100.0 * (baseline - optimal) / baseline
@@ -189,9 +197,7 @@ def markdown_report(run_id: str, energy: RunFigures, trapezoid: RunFigures,
                     sections: list[str] | None = None) -> str:
     """Write the one-page report ``out`` (Markdown, PNGs referenced relatively); ``sections``:
     further Markdown lines before the bags (e.g. ``rectangle_section``)."""
-    def rel(p):
-        return Path(p).resolve().relative_to(out.parent.resolve()).as_posix() \
-            if Path(p).resolve().is_relative_to(out.parent.resolve()) else str(p)
+    rel = partial(link_path, base=out.parent)
     saving = saving_percent(energy.energy, trapezoid.energy)
     improvement = 100.0 * (no_ff.err_mean_mm - energy.err_mean_mm) / no_ff.err_mean_mm
     lines = [
@@ -252,9 +258,7 @@ def rectangle_section(energy: RunFigures, trapezoid: RunFigures, plots: dict[str
     words, '' = none), the two runs' planned and executed energy and camera path error, the
     plans' TCP speed and acceleration as played, the plots. plan_e/plan_t: the planner's
     responses."""
-    def rel(p):
-        return Path(p).resolve().relative_to(out.parent.resolve()).as_posix() \
-            if Path(p).resolve().is_relative_to(out.parent.resolve()) else str(p)
+    rel = partial(link_path, base=out.parent)
     saving = saving_percent(energy.energy, trapezoid.energy)
     speed = path.length / max(energy.duration, 1e-9)
     return [

@@ -30,6 +30,7 @@ import os
 import sys
 import threading
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -601,13 +602,11 @@ def energy_sections(out, cfg, executed, figs, plans, placement, plant_el):
     from .energy_report import (BUS_MODES, duty_section, electrical_figures,
                                 electrical_section, per_year, placement_section,
                                 plot_electrical, saving_percent)
-    from .run_report import path_window
+    from .run_report import link_path, path_window
     el = yaml.safe_load(Path(plant_el).read_text())
     mode, standby = str(el['bus']['mode']), float(el['controller']['standby_power_w'])
 
-    def rel(p):
-        return Path(p).resolve().relative_to(out.resolve()).as_posix() \
-            if Path(p).resolve().is_relative_to(out.resolve()) else str(p)
+    rel = partial(link_path, base=out)
     labels = [k for k in ('energy_ff', 'trapezoid_ff', 'best_energy_ff') if k in executed]
     elec = {k: electrical_figures(executed[k] + POWER_SUFFIX, k, standby,
                                   path_window(executed[k])) for k in labels}
@@ -662,7 +661,7 @@ def energy_sections(out, cfg, executed, figs, plans, placement, plant_el):
                                                         cycle['trapezoid_ff'][m])
                                       for m in BUS_MODES},
         'planned_energy_j': rows,
-        'placement': {k: v for k, v in placement.items()},
+        'placement': dict(placement),
         'duty_cycle': {**duty, 'measure': measure,
                        'rows': {name: {'electrical': e, 'mechanical': m}
                                 for name, e, m in duty_rows}}}
