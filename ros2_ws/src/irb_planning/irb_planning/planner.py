@@ -110,6 +110,7 @@ class _Entry:
         self.fourier_nodes = None
         self.bound: EnergyBound | None = None
         self.min_duration: dict[tuple, tuple] = {}
+        self.tightened: dict[tuple, dict] = {}   # per objective kind, see _solve_checked
         self.lock = threading.Lock()
 
 
@@ -277,17 +278,37 @@ class Planner:
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
     def _solve_checked(self, sreq: SolveRequest, checked: LimitSet, check, solve,
-                       fixed_duration: float, band: TcpBand | None = None):
+                       fixed_duration: float, band: TcpBand | None = None,
+                       memory: dict | None = None):
         """Solve, rescale the profile to the exact ``fixed_duration`` (0 = keep its own) and
         ``check`` it (1 kHz evaluation and the independent check of its message); where a
         speed or torque limit is broken (the exact map against the NLP's smooth one, torque
         between grid points), tighten that limit by the measured excess and solve again, at
         most adapt_rounds times; likewise a process constraint of ``band`` (TCP speed band,
-        acceleration) the played trajectory breaks. Returns (result, profile, (evaluation,
-        trajectory, verification), notes); raises PlanError if the solver fails."""
+        acceleration) the played trajectory breaks. ``memory`` (a dict of the path's problem
+        entry): the joint limits a re-solve had to tighten are remembered as ratios to the
+        limits asked for, and the next request on the same problem starts from them (the
+        excess between grid nodes is a property of the path and grid, nearly the same at a
+        nearby duration: on the 10-segment polyline every energy plan was a solve, a failed
+        check and a second solve). The check still decides; a plan that breaks a limit is
+        tightened further. Returns (result, profile, (evaluation, trajectory, verification),
+        notes); the result's stats sum the solve time and iterations of every solve; raises
+        PlanError if the solver fails."""
         notes = []
+        asked = sreq
+        if memory and 'limits' in memory:
+            tau_r, vel_r = memory['limits']
+            sreq = replace(sreq, torque_limit=sreq.torque_limit * tau_r,
+                           velocity_limit=sreq.velocity_limit * vel_r)
+            notes.append('limits tightened as the last plan on this path needed: torque x '
+                         + ' '.join(f'{v:.3f}' for v in tau_r) + ', speed x '
+                         + ' '.join(f'{v:.3f}' for v in vel_r))
+        spent, iters = 0.0, 0
         for attempt in range(self.settings.adapt_rounds + 1):
             res = solve(sreq)
+            spent += res.stats.solve_time
+            iters += res.stats.iterations
+            res = replace(res, stats=replace(res.stats, solve_time=spent, iterations=iters))
             if not res.stats.success or res.profile is None:
                 raise PlanError(ERROR_SOLVER, 'the optimiser found no solution '
                                 f'({_status_text(res.stats.status)}, '
@@ -298,6 +319,10 @@ class Planner:
             checks = check(profile)
             ev, _, ver = checks
             if (ev.ok and ver.ok) or attempt == self.settings.adapt_rounds:
+                ratios = (sreq.torque_limit / asked.torque_limit,
+                          sreq.velocity_limit / asked.velocity_limit)
+                if memory is not None and ev.ok and ver.ok and min(map(np.min, ratios)) < 1:
+                    memory['limits'] = ratios
                 return res, profile, checks, notes
             over_tau = np.maximum(ev.peak_torque, ver.peak_torque) - checked.torque
             over_v = np.maximum(ev.peak_speed, ver.peak_speed) - checked.velocity
@@ -461,11 +486,16 @@ class Planner:
             sreq = replace(base, duration=req.duration, time_weight=req.time_weight,
                            energy_weight=1.0)
             solve = entry.transcription.solve
+            memory = None
             if req.objective != OBJECTIVE_ENERGY:
                 solve = self.fourier_problem(entry, req.fourier_order, sample).solve
+            else:       # energy plans of one kind on this problem share their tightening
+                with entry.lock:
+                    memory = entry.tightened.setdefault(
+                        (req.duration > 0, req.time_weight, sreq.process_key), {})
             try:
                 res, profile, checks, notes = self._solve_checked(sreq, checked, check, solve,
-                                                                  req.duration, band)
+                                                                  req.duration, band, memory)
             except PlanError as exc:
                 raise _band_error(exc, band) from None
             coeffs = getattr(res, 'coeffs', None)
