@@ -190,8 +190,10 @@ def main():
                 trap = rows_t[0]['by_mode'][m]['energy_j']['total']
                 row['by_mode'][m]['saving_vs_trapezoid_pct'] = 100 * (
                     1 - row['by_mode'][m]['energy_j']['total'] / trap)
-            # power at rest at the start (motors on, brakes released, holding the arm)
-            row['rest_power_w'] = float(model.power(v.tau[0], np.zeros_like(v.qd[0])))
+            # power at rest at the start pose (motors on, brakes released, holding the arm
+            # against gravity): what a meter reads on the robot standing still
+            hold = pl.model.gravity(v.q[0])
+            row['rest_power_w'] = float(model.power(hold, np.zeros_like(hold), 'shared'))
             rows.append(row)
             rows_t.append(row)
             for m, d in row['by_mode'].items():
