@@ -134,6 +134,59 @@ class ElectricalModel:
             out[f'total_{mode}'] = self.energy(t, tau, qd, mode)
         return out
 
+    def flows(self, t, tau, qd, mode: str | None = None) -> dict:
+        """Where the electrical energy of one bus mode goes, over samples t (M,) [J].
+
+        Every part is the time integral (trapezoidal rule, like ``energy``) of a power that
+        is >= 0 at each instant except 'work', and the parts add up to the total exactly:
+
+            total = standby + work + gear_loss + copper + drive_conversion + drive_idle
+                    + brake_resistor + regeneration_loss
+
+        'work' = int sum_i tau_i qd_i (net joint work: motoring minus generated, 'work_motoring'
+        and 'work_generated' >= 0 given apart); 'gear_loss' = P_g - P_j; 'copper' = P_cu;
+        'drive_conversion' = P_ax - P_idle - P_e; 'drive_idle' = P_idle; 'brake_resistor' the
+        surplus burned ('none': every axis's negative P_ax, 'shared': the negative net bus
+        power, 'regenerative': 0); 'regeneration_loss' = (1 - eta_r) x the negative net bus
+        power ('regenerative' only), whose other part, 'returned', went back to the grid (it is
+        already netted inside 'work'). Also 'total' (= ``energy``), 'duration' [s], 'mode'.
+        """
+        mode = mode or self.bus_mode
+        if mode not in BUS_MODES:
+            raise ValueError(f'bus mode {mode!r} unknown; one of {list(BUS_MODES)}')
+        t = np.asarray(t, float)
+        tau = np.asarray(tau, float)
+        qd = np.asarray(qd, float)
+        integ = lambda p: float(np.trapezoid(p, t))  # noqa: E731
+        pj = tau * qd
+        s = (pj >= 0).astype(float)
+        em, eg = self._v('gear_efficiency_motoring'), self._v('gear_efficiency_generating')
+        pg = s * pj / em + (1 - s) * eg * pj
+        taum = tau / self._v('gear_ratio') * (s / em + (1 - s) * eg)
+        pcu = self._v('resistance') * (taum / self._v('torque_constant')) ** 2
+        pe = pg + pcu
+        pax = self.axis_power(tau, qd)
+        idle = np.broadcast_to(self._v('drive_idle_power'), pax.shape)
+        net = pax.sum(axis=-1)
+        surplus = np.maximum(-net, 0.0)
+        burned = {BUS_NONE: np.maximum(-pax, 0.0).sum(axis=-1), BUS_SHARED: surplus,
+                  BUS_REGENERATIVE: np.zeros_like(net)}[mode]
+        er = float(self.regenerative_efficiency) if mode == BUS_REGENERATIVE else 0.0
+        regen = surplus if mode == BUS_REGENERATIVE else np.zeros_like(net)
+        return {'mode': mode, 'duration': float(t[-1] - t[0]),
+                'standby': integ(np.full(t.shape, float(self.standby_power))),
+                'work': integ(pj.sum(axis=-1)),
+                'work_motoring': integ(np.maximum(pj, 0.0).sum(axis=-1)),
+                'work_generated': integ(np.maximum(-pj, 0.0).sum(axis=-1)),
+                'gear_loss': integ((pg - pj).sum(axis=-1)),
+                'copper': integ(pcu.sum(axis=-1)),
+                'drive_conversion': integ((pax - idle - pe).sum(axis=-1)),
+                'drive_idle': integ(idle.sum(axis=-1)),
+                'brake_resistor': integ(burned),
+                'regeneration_loss': integ((1 - er) * regen),
+                'returned': integ(er * regen),
+                'total': self.energy(t, tau, qd, mode)}
+
     def _v(self, name):
         return np.asarray(getattr(self, name), float)
 
@@ -150,6 +203,24 @@ class ElectricalModel:
         pax = self.casadi_axis_power(tau, qd, smoothing)
         return _bus_power(_casadi_ops(smoothing), self, [pax[i, :] for i in range(self.n)],
                           mode or self.bus_mode, smoothing)
+
+
+#: the parts of ``ElectricalModel.flows`` that add up to its total
+FLOW_PARTS = ('standby', 'work', 'gear_loss', 'copper', 'drive_conversion', 'drive_idle',
+              'brake_resistor', 'regeneration_loss')
+
+
+def shares(flows: dict) -> dict:
+    """Percentages of the total [%] of every part of ``flows`` (FLOW_PARTS, 'returned' and
+    the work split), with 'parts_sum' (100 up to round-off) and 'motion' (100 - standby)."""
+    total = float(flows['total'])
+    if not total > 0:
+        raise ValueError(f'total electrical energy {total} J is not positive')
+    keys = FLOW_PARTS + ('returned', 'work_motoring', 'work_generated')
+    out = {k: 100.0 * float(flows[k]) / total for k in keys}
+    out['parts_sum'] = sum(out[k] for k in FLOW_PARTS)
+    out['motion'] = 100.0 - out['standby']
+    return out
 
 
 class _Ops:
