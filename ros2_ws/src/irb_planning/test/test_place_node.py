@@ -221,3 +221,33 @@ def test_place_client_asks_the_node_and_writes_its_outputs(ros, tmp_path, capsys
     # bad arguments: one line, exit 2, no call
     assert place_cli.main(['--node', '--lo', '1', '0', '0', '--hi', '0', '0', '0']) == 2
     assert 'lo <= hi' in capsys.readouterr().err
+
+
+def test_destroying_the_node_stops_a_running_search_at_its_next_plan():
+    """Ctrl-C must not wait for a search of minutes: after destroy_node no further plan of
+    the search starts (counted at the planner), and the search ends."""
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '41')))
+    ns = f'/place_stop_{uuid.uuid4().hex[:8]}'
+    server = PlannerNode(context=ctx, namespace=ns,
+                         parameter_overrides=[Parameter('grid_size', value=40)])
+    client = rclpy.create_node('place_stop_client', namespace=ns, context=ctx)
+    executor = MultiThreadedExecutor(num_threads=4, context=ctx)
+    executor.add_node(server)
+    executor.add_node(client)
+    calls = []
+    plan = server.place_planner.plan
+    server.place_planner.plan = lambda req: calls.append(req) or plan(req)
+    try:
+        place = client.create_client(PlaceTask, 'place_task')
+        assert place.wait_for_service(timeout_sec=30.0)
+        place.call_async(_place(lo=(0.5, -0.2, 0.13), hi=(0.7, 0.2, 0.13), n=(3, 3, 1)))
+        _spin_until(executor, lambda: len(calls) >= 1)
+        server.destroy_node()
+        started = len(calls)
+        _spin_until(executor, lambda: not server.place_running)
+        assert len(calls) == started < 9
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        rclpy.try_shutdown(context=ctx)
