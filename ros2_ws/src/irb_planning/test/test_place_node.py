@@ -160,6 +160,29 @@ def test_place_finds_the_best_shows_refused_points_and_keeps_plan_path_serving(
     assert f'{resp.best_energy:.2f} J' in text and 'trapezoid' in text
 
 
+@pytest.mark.slow
+def test_place_on_the_electrical_model_judges_by_the_electrical_energy(ros, planner):
+    """The search judges by the requested model: best_energy is the electrical (shared bus)
+    energy of the plan, and a separate Planner re-planning the placement agrees."""
+    server, client, executor, ns = ros
+    place = client.create_client(PlaceTask, 'place_task')
+    assert place.wait_for_service(timeout_sec=30.0)
+    c = (0.6, 0.0, 0.13)
+    resp = _wait(executor, place.call_async(_place(
+        lo=c, hi=c, n=(1, 1, 1), energy_model='electrical_shared', grid_size=30)))
+    assert resp.success, resp.message
+    assert resp.energy_model == 'electrical_shared' and list(resp.map_shape) == [1, 1, 1, 1]
+    shared = list(resp.electrical_bus_modes).index('shared')
+    assert resp.best_energy == pytest.approx(resp.electrical_energy[shared], rel=1e-12)
+    assert resp.best_energy > 10 * resp.energy          # standby: far above the mechanical
+    assert resp.map_energy[0] == pytest.approx(resp.best_energy, rel=1e-3)   # same grid
+    again = planner.plan(placement_request(
+        PlanRequest(radius=0.15, duration=DURATION, grid_size=30,
+                    energy_model='electrical_shared'), c))
+    assert plan_energy(again, 'electrical_shared') == pytest.approx(resp.best_energy,
+                                                                    rel=2e-3)
+
+
 def test_bad_requests_refused_with_one_line_and_nothing_reachable_shows_the_map(ros):
     server, client, executor, ns = ros
     place = client.create_client(PlaceTask, 'place_task')
