@@ -1,4 +1,4 @@
-"""Conversions between PlanPath messages and the planning core's dataclasses.
+"""Conversions between PlanPath / PlaceTask messages and the planning core's dataclasses.
 
 ``/planned_theta_profile`` (std_msgs/Float64MultiArray): a 4 x N row-major matrix, layout
 dim[0] = 'rows: t_s, theta_rad, theta_dot_rad_s, theta_ddot_rad_s2' (size 4, stride 4 N),
@@ -12,12 +12,13 @@ from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point, Vector3
 from irb_description.stamps import sec_nanosec
 from irb_interfaces.msg import PathSpec
-from irb_interfaces.srv import PlanPath
+from irb_interfaces.srv import PlaceTask, PlanPath
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from .placement import PlacementResult, Region
 from .planner import PlanResult
-from .request import PlanRequest
+from .request import PATH_CIRCLE, PlanRequest
 
 PROFILE_ROWS = 'rows: t_s, theta_rad, theta_dot_rad_s, theta_ddot_rad_s2'
 
@@ -157,3 +158,100 @@ def profile_from_msg(msg: Float64MultiArray) -> dict:
     n = msg.layout.dim[1].size
     data = np.asarray(msg.data, float).reshape(4, n)
     return dict(zip(('t', 'theta', 'theta_dot', 'theta_ddot'), data))
+
+
+def place_task_from_msg(msg: PlaceTask.Request, defaults: dict) -> dict:
+    """PlaceTask.Request -> the arguments of ``placement.search`` (task, region, n,
+    coarse_grid, refine, min_step, min_tilt_step). ``defaults`` holds the node's values for
+    the fields a request leaves 0 (coarse_grid, n, refine, min_step, min_tilt_step). Raises
+    ValueError with one line when the task or region is not one (the planner's own
+    validation of the placed circle comes after)."""
+    p = msg.path
+    if p.type not in ('', PATH_CIRCLE):
+        raise ValueError(f"placement takes a circle task (path.type 'circle'), got {p.type!r}")
+    if not (np.isfinite(msg.duration) and msg.duration > 0):
+        raise ValueError(f'duration must be > 0 s, got {msg.duration}')
+    lo = np.array([msg.lo.x, msg.lo.y, msg.lo.z], float)
+    hi = np.array([msg.hi.x, msg.hi.y, msg.hi.z], float)
+    region = Region(lo, hi, tuple(float(x) for x in msg.rotations),
+                    tuple(float(x) for x in msg.tilt_x), tuple(float(x) for x in msg.tilt_y))
+    n = tuple(int(k) or int(d) for k, d in zip(msg.grid_points, defaults['n']))
+    if min(n) < 1:
+        raise ValueError(f'grid_points must be >= 1 per axis, got {list(n)}')
+    steps = dict(min_step=float(msg.min_step) or defaults['min_step'],
+                 min_tilt_step=float(msg.min_tilt_step) or defaults['min_tilt_step'])
+    for name, value in steps.items():
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f'{name} must be > 0, got {value}')
+    task = PlanRequest(radius=p.radius, start_angle=p.start_angle, direction=int(p.direction),
+                       duration=msg.duration, energy_model=msg.energy_model,
+                       friction_map=msg.friction_map, grid_size=int(msg.grid_size))
+    return dict(task=task, region=region, n=n,
+                coarse_grid=int(msg.coarse_grid_size) or int(defaults['coarse_grid']),
+                refine=int(msg.refine) or int(defaults['refine']), **steps)
+
+
+def fill_place_map(resp: PlaceTask.Response, res: PlacementResult) -> PlaceTask.Response:
+    """The energy map, the certificate and the search figures of ``res`` into ``resp``
+    (also for a search that found nothing: the map says why)."""
+    E = np.asarray(res.energy, float)
+    tilts = (np.asarray(res.tilts, float) if res.tilts is not None
+             else np.zeros((E.shape[3], 2)))
+    resp.map_shape = [int(k) for k in E.shape]
+    resp.map_x, resp.map_y, resp.map_z = (np.asarray(a, float).tolist()
+                                          for a in (res.xs, res.ys, res.zs))
+    resp.map_rotation = np.asarray(res.rotations, float).tolist()
+    resp.map_tilt_x, resp.map_tilt_y = tilts[:, 0].tolist(), tilts[:, 1].tolist()
+    resp.map_energy = E.ravel().tolist()
+    reason = [''] * E.size
+    for idx, text in res.reasons.items():
+        reason[int(np.ravel_multi_index(idx, E.shape))] = text
+    resp.map_reason = reason
+    resp.region_lower_bound = float(res.region_lower_bound)
+    resp.possible_improvement_pct = float(res.possible_improvement_pct)
+    resp.lipschitz = (np.asarray(res.lipschitz, float).tolist() if res.lipschitz is not None
+                      else [])
+    resp.cells_covered, resp.cells_total = int(res.cells_covered), int(res.cells_total)
+    resp.evaluations = int(res.evaluations)
+    resp.search_time = float(res.wall_time)
+    return resp
+
+
+def fill_place_response(resp: PlaceTask.Response, res: PlacementResult, nodes: dict
+                        ) -> PlaceTask.Response:
+    """A successful search into ``resp``: the best placement, its plan (the PlanPath fields,
+    by ``fill_response``), the map and the certificate."""
+    fill_response(resp, res.best_plan, nodes)
+    c = np.asarray(res.best_center, float)
+    resp.best_center = Point(x=c[0], y=c[1], z=c[2])
+    resp.best_rotation = float(res.best_rotation)
+    resp.best_tilt_x, resp.best_tilt_y = (float(x) for x in res.best_tilt)
+    resp.best_energy = float(res.best_energy)
+    resp.best_path = path_msg(res.best_plan.request)
+    resp.error_code = PlaceTask.Response.ERROR_NONE
+    return fill_place_map(resp, res)
+
+
+def placement_from_msg(resp: PlaceTask.Response) -> PlacementResult:
+    """The map, best placement and certificate of a PlaceTask response as a
+    ``PlacementResult`` (no plan): what ``placement.plot_map`` draws."""
+    shape = tuple(int(k) for k in resp.map_shape)
+    E = np.asarray(resp.map_energy, float).reshape(shape)
+    reasons = {tuple(int(i) for i in np.unravel_index(k, shape)): text
+               for k, text in enumerate(resp.map_reason) if text}
+    found = resp.success
+    c = resp.best_center
+    return PlacementResult(
+        np.asarray(resp.map_x, float), np.asarray(resp.map_y, float),
+        np.asarray(resp.map_z, float), np.asarray(resp.map_rotation, float), E, reasons,
+        best_center=np.array([c.x, c.y, c.z]) if found else None,
+        best_rotation=float(resp.best_rotation), best_energy=float(resp.best_energy),
+        region_lower_bound=float(resp.region_lower_bound),
+        possible_improvement_pct=float(resp.possible_improvement_pct),
+        lipschitz=np.asarray(resp.lipschitz, float) if len(resp.lipschitz) else None,
+        cells_covered=int(resp.cells_covered), cells_total=int(resp.cells_total),
+        evaluations=int(resp.evaluations), wall_time=float(resp.search_time),
+        measure=resp.energy_model or 'mechanical',
+        tilts=np.stack([np.asarray(resp.map_tilt_x, float),
+                        np.asarray(resp.map_tilt_y, float)], axis=-1).reshape(-1, 2),
+        best_tilt=np.array([resp.best_tilt_x, resp.best_tilt_y], float))

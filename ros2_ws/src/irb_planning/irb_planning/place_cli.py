@@ -1,6 +1,12 @@
-"""`ros2 run irb_planning place`: energy-optimal placement of a circle task (offline, no ROS
-graph): grid over a box for the centre x rotations x tilts of the plane, refinement,
-certificate, energy map PNG."""
+"""`ros2 run irb_planning place`: energy-optimal placement of a circle task: grid over a box for
+the centre x rotations x tilts of the plane, refinement, certificate, energy map PNG.
+
+Offline (default, no ROS graph: the search runs here, progress per plan) or, with ``--node``,
+as a client of the planner node's ``place_task`` service (the search runs in the node, which
+logs the progress; this waits up to ``--timeout`` s, prints the summary and writes the same
+PNG and JSON from the answer). Exit code 0 on success, 1 if the search (or the service)
+refused or found nothing reachable, 2 on bad arguments or no answer.
+"""
 from __future__ import annotations
 
 import argparse
@@ -37,9 +43,130 @@ def parse_args(argv):
     p.add_argument('--grid', type=int, default=0, help='theta nodes of refinement, 0 = default')
     p.add_argument('--refine', type=int, default=2, help='best map points re-planned')
     p.add_argument('--min-step', type=float, default=0.025, help='compass search end [m]')
+    p.add_argument('--start-angle', type=float, default=0.0,
+                   help='start point of the circle in its own plane [rad]')
+    p.add_argument('--friction-map', default='', help="friction-map YAML ('' = nominal; "
+                   '--node only: the node reads it from its friction_map_dirs)')
     p.add_argument('--plot', default='placement.png', help="PNG path, '' = no plot")
     p.add_argument('--json', default='', help='write the result as JSON here')
+    p.add_argument('--node', action='store_true',
+                   help='ask the planner node (service --service) instead of searching here')
+    p.add_argument('--service', default='place_task', help='--node: the PlaceTask service')
+    p.add_argument('--timeout', type=float, default=900.0,
+                   help='--node: longest wait for the answer [s]')
     return p.parse_args(argv)
+
+
+def result_json(res) -> dict:
+    """The JSON of a search result (offline and --node alike)."""
+    return dict(best_center=(None if res.best_center is None
+                             else np.asarray(res.best_center, float).tolist()),
+                best_rotation_deg=float(np.degrees(res.best_rotation)),
+                best_tilt_deg=np.degrees(res.best_tilt).tolist(),
+                best_energy_j=res.best_energy, measure=res.measure,
+                region_lower_bound_j=res.region_lower_bound,
+                possible_improvement_pct=res.possible_improvement_pct,
+                cells_covered=res.cells_covered, cells_total=res.cells_total,
+                lipschitz_j_m=(None if res.lipschitz is None
+                               else np.asarray(res.lipschitz, float).tolist()),
+                evaluations=res.evaluations, wall_time_s=res.wall_time,
+                refused={str(k): v for k, v in res.reasons.items()})
+
+
+def write_outputs(a, res) -> None:
+    """The PNG (--plot) and the JSON (--json) of a result."""
+    if a.plot and not np.all(np.isnan(res.energy)):
+        print('plot:', plot_map(a.plot, res))
+    if a.json:
+        with open(a.json, 'w', encoding='utf-8') as f:
+            json.dump(result_json(res), f, indent=1)
+        print('json:', a.json)
+
+
+def build_request(a, region: Region):
+    """PlaceTask.Request from the arguments (angles already in radians in ``region``)."""
+    from geometry_msgs.msg import Point
+    from irb_interfaces.msg import PathSpec
+    from irb_interfaces.srv import PlaceTask
+    req = PlaceTask.Request()
+    req.path = PathSpec(type=PathSpec.TYPE_CIRCLE, radius=a.radius,
+                        start_angle=a.start_angle, direction=a.direction)
+    req.duration, req.energy_model, req.friction_map = a.duration, a.energy_model, \
+        a.friction_map
+    req.grid_size, req.coarse_grid_size = a.grid, a.coarse_grid
+    req.lo = Point(x=a.lo[0], y=a.lo[1], z=a.lo[2])
+    req.hi = Point(x=a.hi[0], y=a.hi[1], z=a.hi[2])
+    req.rotations = [float(x) for x in region.rotations]
+    req.tilt_x = [float(x) for x in region.tilt_x]
+    req.tilt_y = [float(x) for x in region.tilt_y]
+    req.grid_points = [int(k) for k in a.n]
+    req.refine, req.min_step = a.refine, a.min_step
+    req.min_tilt_step = float(np.radians(a.min_tilt_step))
+    return req
+
+
+def summary(resp) -> str:
+    """The placement, the certificate and the plan's table (the plan client's)."""
+    from .plan_cli import summary as plan_summary
+    c = resp.best_center
+    lines = [f'best placement: centre [{c.x:.4f}, {c.y:.4f}, {c.z:.4f}] m, rotation '
+             f'{np.degrees(resp.best_rotation):.1f} deg, tilt ({np.degrees(resp.best_tilt_x):.2f}'
+             f', {np.degrees(resp.best_tilt_y):.2f}) deg: {resp.best_energy:.2f} J '
+             f'({resp.energy_model})',
+             f'map: {len(resp.map_energy)} points, '
+             f'{sum(1 for r in resp.map_reason if r)} refused; lower bound '
+             f'{resp.region_lower_bound:.2f} J over {resp.cells_covered}/{resp.cells_total} '
+             f'fully reachable cells, possible improvement <= '
+             f'{resp.possible_improvement_pct:.2f} %; {resp.evaluations} plans, '
+             f'{resp.search_time:.1f} s in the node'
+             + (f'; node map PNG {resp.map_png}' if resp.map_png else ''),
+             'plan at the best placement:', plan_summary(resp)]
+    return '\n'.join(lines)
+
+
+def ask_node(a, region: Region, args=None) -> int:
+    """--node: call the service, print, write the outputs; the exit code."""
+    import rclpy
+    from irb_description.node_main import refuse_insecure_start
+    from irb_interfaces.srv import PlaceTask
+    from rclpy.executors import SingleThreadedExecutor
+
+    from .messages import placement_from_msg
+    request = build_request(a, region)
+    refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
+    rclpy.init(args=args)
+    node = rclpy.create_node('place_cli')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        client = node.create_client(PlaceTask, a.service)
+        if not client.wait_for_service(timeout_sec=min(a.timeout, 30.0)):
+            print(f'service {a.service} not available', file=sys.stderr)
+            return 2
+        print(f'asking {a.service} (the node logs the progress; waiting up to {a.timeout:g} s)',
+              flush=True)
+        future = client.call_async(request)
+        executor.spin_until_future_complete(future, timeout_sec=a.timeout)
+        if not future.done():
+            print(f'no answer within {a.timeout:g} s', file=sys.stderr)
+            return 2
+        resp = future.result()
+        if not resp.success:
+            print(f'placement refused (error {resp.error_code}): {resp.message}')
+            if len(resp.map_energy):               # nothing reachable: the map says why
+                res = placement_from_msg(resp)
+                res.measure = a.energy_model
+                write_outputs(a, res)
+            return 1
+        print(summary(resp))
+        write_outputs(a, placement_from_msg(resp))
+        return 0
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
 
 
 def main(args=None):
@@ -55,34 +182,23 @@ def main(args=None):
     except ValueError as exc:
         print(f'place: {exc}', file=sys.stderr)
         return 2
+    if a.node:
+        return ask_node(a, region, args)
     from .planner import Planner
     planner = Planner()
     task = PlanRequest(radius=a.radius, direction=a.direction, duration=a.duration,
-                       energy_model=a.energy_model, grid_size=a.grid)
+                       energy_model=a.energy_model, grid_size=a.grid,
+                       start_angle=a.start_angle, friction_map=a.friction_map)
     try:
         res = search(planner, task, region, tuple(a.n), a.coarse_grid, a.refine, a.min_step,
                      progress=lambda s: print(s, flush=True),
                      min_tilt_step=np.radians(a.min_tilt_step))
     except KeyboardInterrupt:
         return 130
+    write_outputs(a, res)              # also when nothing is reachable: the JSON says why
     if res.best_center is None:
         print('no reachable placement in the region', file=sys.stderr)
         return 1
-    if a.plot:
-        print('plot:', plot_map(a.plot, res))
-    if a.json:
-        out = dict(best_center=res.best_center.tolist(),
-                   best_rotation_deg=float(np.degrees(res.best_rotation)),
-                   best_tilt_deg=np.degrees(res.best_tilt).tolist(),
-                   best_energy_j=res.best_energy, measure=res.measure,
-                   region_lower_bound_j=res.region_lower_bound,
-                   possible_improvement_pct=res.possible_improvement_pct,
-                   cells_covered=res.cells_covered, cells_total=res.cells_total,
-                   lipschitz_j_m=res.lipschitz.tolist(), evaluations=res.evaluations,
-                   wall_time_s=res.wall_time, refused={str(k): v for k, v in
-                                                       res.reasons.items()})
-        with open(a.json, 'w', encoding='utf-8') as f:
-            json.dump(out, f, indent=1)
     return 0
 
 

@@ -60,8 +60,9 @@ class Region:
 
     def __post_init__(self):
         lo, hi = np.asarray(self.lo, float), np.asarray(self.hi, float)
-        if lo.shape != (3,) or hi.shape != (3,) or np.any(hi < lo):
-            raise ValueError(f'region: lo and hi must be 3 numbers with lo <= hi, got '
+        if (lo.shape != (3,) or hi.shape != (3,) or not np.all(np.isfinite(lo))
+                or not np.all(np.isfinite(hi)) or np.any(hi < lo)):
+            raise ValueError(f'region: lo and hi must be 3 finite numbers with lo <= hi, got '
                              f'{lo.tolist()} {hi.tolist()}')
         for name in ('rotations', 'tilt_x', 'tilt_y'):
             v = np.asarray(getattr(self, name), float)

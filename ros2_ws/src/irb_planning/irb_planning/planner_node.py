@@ -1,20 +1,33 @@
-"""`ros2 run irb_planning planner`: serve PlanPath and latch the latest plan.
+"""`ros2 run irb_planning planner`: serve PlanPath and PlaceTask, latch the latest plan.
 
-Thin adapter over ``planner.Planner``: parameters -> PlannerSettings, request message ->
-PlanRequest, result -> response + latched topics. The service runs in its own callback group
-under a MultiThreadedExecutor, so a solve never blocks the node's other callbacks (CasADi
-releases the GIL while IPOPT runs).
+Thin adapter over ``planner.Planner`` and ``placement.search``: parameters ->
+PlannerSettings, request message -> PlanRequest / search arguments, result -> response +
+latched topics. Each service runs in its own callback group under a MultiThreadedExecutor,
+so a solve never blocks the node's other callbacks (CasADi releases the GIL while IPOPT
+runs).
+
+``place_task`` (a search of minutes) has its own ``Planner`` (same model, settings and
+friction-map directories, its own small cache): its dozens of placements are each a new
+problem and would otherwise push ``plan_path``'s cached problems and warm starts out of the
+shared LRU cache, and both would queue on one pinocchio lock. Its callback group is
+reentrant: a second request while a search runs is answered at once with ERROR_BUSY (a
+non-blocking lock), not queued behind it. Destroying the node stops a running search at its
+next plan (the progress callback raises), so Ctrl-C never waits for minutes.
 """
 from __future__ import annotations
 
 import dataclasses
+import os
+import threading
+import time
 import traceback
 
+import numpy as np
 from irb_description.node_main import run_node, spin_until_signal
 from irb_interfaces.msg import PathSpec
-from irb_interfaces.srv import PlanPath
+from irb_interfaces.srv import PlaceTask, PlanPath
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -23,8 +36,9 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from . import messages
+from .placement import placement_request, plot_map, search
 from .planner import Planner, PlannerSettings, request_error_code
-from .request import PlanError
+from .request import PlanError, validate
 
 #: parameter name -> (PlannerSettings field, description with unit)
 PARAMETERS = {
@@ -62,6 +76,42 @@ PARAMETERS = {
 }
 #: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
 MAP_DIRS = 'friction_map_dirs'
+#: place_task parameter -> (default, description with unit)
+PLACE_PARAMETERS = {
+    'place_grid_points': ([3, 3, 3], 'map points along x, y, z when a place_task request '
+                          'says 0 [-]'),
+    'place_coarse_grid_size': (40, 'theta nodes of each map point when the request says 0 '
+                               '[-]'),
+    'place_refine': (2, 'best map points re-planned on the full grid when the request says '
+                     '0 [-]'),
+    'place_min_step_m': (0.025, 'end of the compass search for the centre when the request '
+                         'says 0 [m]'),
+    'place_min_tilt_step_rad': (0.0349, 'end of the compass search for the tilts when the '
+                                'request says 0 [rad]'),
+    'place_max_points': (1000, 'most map points (x * y * z * orientations) a request may ask '
+                         'for [-]'),
+    'place_cache_size': (2, "built problems the search's own planner keeps (each placement "
+                         'is a new problem) [-]'),
+    'place_map_dir': ('', "directory the map PNG of each search is written to; '' = none "
+                      '[-]'),
+}
+
+
+class _Stopped(Exception):
+    """The node is being destroyed: end the running search."""
+
+
+class _StoppablePlanner:
+    """The search's planner, refusing to start another plan once ``stop`` is set (the
+    search lets anything but PlanError through, so the search ends there)."""
+
+    def __init__(self, planner: Planner, stop: threading.Event):
+        self.planner, self.stop = planner, stop
+
+    def plan(self, request):
+        if self.stop.is_set():
+            raise _Stopped()
+        return self.planner.plan(request)
 
 
 class PlannerNode(Node):
@@ -91,9 +141,21 @@ class PlannerNode(Node):
         self.pub_path = self.create_publisher(PathSpec, 'planned_path', latched)
         self.srv = self.create_service(PlanPath, 'plan_path', self.on_request,
                                        callback_group=MutuallyExclusiveCallbackGroup())
+        self.place = {name: self.declare_parameter(name, default, ParameterDescriptor(
+            description=text, read_only=True)).value
+            for name, (default, text) in PLACE_PARAMETERS.items()}
+        if len(self.place['place_grid_points']) != 3:
+            raise ValueError('place_grid_points must be 3 numbers (x, y, z)')
+        self.place_planner = Planner(self.planner.model.copy(), dataclasses.replace(
+            settings, cache_size=int(self.place['place_cache_size'])))
+        self._place_lock = threading.Lock()
+        self._place_state = ''            # what the running search is doing (for ERROR_BUSY)
+        self._stopping = threading.Event()
+        self.place_srv = self.create_service(PlaceTask, 'place_task', self.on_place,
+                                             callback_group=ReentrantCallbackGroup())
         self.get_logger().info(
-            f'serving plan_path ({dataclasses.asdict(settings)}); friction maps from '
-            f'{[str(d) for d in self.planner.map_dirs]}')
+            f'serving plan_path and place_task ({dataclasses.asdict(settings)}, '
+            f'{self.place}); friction maps from {[str(d) for d in self.planner.map_dirs]}')
 
     def on_request(self, request, response):
         try:
@@ -117,16 +179,135 @@ class PlannerNode(Node):
         self.get_logger().info(response.message)
         return response
 
-    def _fail(self, response, code, message):
+    def _fail(self, response, code, message, what='plan'):
         response.success = False
         response.error_code = int(code)
         response.message = message
-        self.get_logger().warning(f'plan refused (code {code}): {message}')
+        self.get_logger().warning(f'{what} refused (code {code}): {message}')
         return response
+
+    # --- place_task -----------------------------------------------------------------------
+    def _place_args(self, request) -> dict:
+        """The search's arguments from the request, checked; PlanError(code, message)."""
+        p = self.place
+        defaults = dict(n=list(p['place_grid_points']),
+                        coarse_grid=p['place_coarse_grid_size'], refine=p['place_refine'],
+                        min_step=p['place_min_step_m'],
+                        min_tilt_step=p['place_min_tilt_step_rad'])
+        try:
+            args = messages.place_task_from_msg(request, defaults)
+        except ValueError as exc:
+            raise PlanError(PlaceTask.Response.ERROR_INVALID_REQUEST, str(exc)) from None
+        region = args['region']
+        points = int(np.prod(args['n'])) * region.orientations().shape[0]
+        if points > p['place_max_points']:
+            raise PlanError(PlaceTask.Response.ERROR_INVALID_REQUEST,
+                            f'{points} map points asked for, at most {p["place_max_points"]} '
+                            '(parameter place_max_points)')
+        # the planner's own checks of the task (radius, direction, energy model, grids) on
+        # the placed circle, for both grids, and the friction map, before the first plan
+        pl, s = self.place_planner, self.place_planner.settings
+        centre = 0.5 * (np.asarray(region.lo) + np.asarray(region.hi))
+        for grid in (args['coarse_grid'], args['task'].grid_size):
+            validate(dataclasses.replace(placement_request(args['task'], centre),
+                                         grid_size=grid), s.grid_size, s.max_grid_size)
+        pl.friction_map(args['task'].friction_map)
+        return args
+
+    def on_place(self, request, response):
+        try:
+            args = self._place_args(request)
+        except PlanError as exc:
+            return self._fail(response, exc.code, exc.message, 'placement')
+        except Exception:  # noqa: BLE001 - the node must keep serving
+            self.get_logger().error(traceback.format_exc())
+            return self._fail(response, PlaceTask.Response.ERROR_INVALID_REQUEST,
+                              'the request could not be read (details in the planner log)',
+                              'placement')
+        if not self._place_lock.acquire(blocking=False):
+            return self._fail(response, PlaceTask.Response.ERROR_BUSY,
+                              'a placement search is already running '
+                              f'({self._place_state}); ask again when it has finished',
+                              'placement')
+        try:
+            return self._place(args, response)
+        except _Stopped:
+            return self._fail(response, PlaceTask.Response.ERROR_SOLVER,
+                              'the planner node is shutting down; search stopped', 'placement')
+        except Exception:  # noqa: BLE001 - the node must keep serving
+            self.get_logger().error(traceback.format_exc())
+            return self._fail(response, PlaceTask.Response.ERROR_SOLVER,
+                              'internal error of the placement search (details in the '
+                              'planner log); please report it', 'placement')
+        finally:
+            self._place_state = ''
+            self._place_lock.release()
+
+    def _place(self, args, response):
+        log = self.get_logger()
+
+        def progress(line: str) -> None:
+            self._place_state = line
+            log.info(f'place_task: {line}')
+
+        log.info(f'place_task: {args["n"]} centres x {args["region"].orientations().shape[0]}'
+                 f' orientations, {args["task"].energy_model or "mechanical"} energy, '
+                 f'{args["task"].duration:g} s')
+        self._place_state = 'starting'
+        res = search(_StoppablePlanner(self.place_planner, self._stopping),
+                     progress=progress, **args)
+        png = self._write_map(res)
+        response.map_png = png
+        if res.best_center is None:
+            refused = sorted(set(res.reasons.values()))
+            messages.fill_place_map(response, res)
+            return self._fail(response, PlaceTask.Response.ERROR_UNREACHABLE,
+                              f'no point of the region could be planned ({len(res.reasons)} '
+                              f'refused: {"; ".join(refused[:2])})', 'placement')
+        nodes = self.place_planner.node_samples(res.best_plan)
+        messages.fill_place_response(response, res, nodes)
+        response.map_png = png
+        response.message = (
+            f'best placement centre {np.round(res.best_center, 4).tolist()} m, rotation '
+            f'{np.degrees(res.best_rotation):.1f} deg, tilt '
+            f'{np.round(np.degrees(res.best_tilt), 2).tolist()} deg: {res.best_energy:.2f} J '
+            f'({res.measure}); {len(res.reasons)} of {res.energy.size} map points refused; '
+            f'lower bound {res.region_lower_bound:.2f} J over {res.cells_covered}/'
+            f'{res.cells_total} cells, possible improvement <= '
+            f'{res.possible_improvement_pct:.2f} %; {res.evaluations} plans, '
+            f'{res.wall_time:.1f} s')
+        log.info(f'place_task: {response.message}')
+        return response
+
+    def _write_map(self, res) -> str:
+        """The map PNG in place_map_dir ('' = none); '' and a warning if it cannot be
+        written (the answer does not depend on it)."""
+        folder = self.place['place_map_dir']
+        if not folder or np.all(np.isnan(res.energy)):
+            return ''
+        name = os.path.join(folder, time.strftime('placement_%Y%m%d_%H%M%S')
+                            + f'_{time.time_ns() % 1000000:06d}.png')
+        try:
+            os.makedirs(folder, exist_ok=True)
+            return plot_map(name, res)
+        except OSError as exc:
+            self.get_logger().warning(f'place_task: map PNG not written to {name}: '
+                                      f'{exc.strerror}')
+            return ''
+
+    @property
+    def place_running(self) -> bool:
+        """True while a placement search runs."""
+        return self._place_lock.locked()
+
+    def destroy_node(self):
+        self._stopping.set()               # a running search ends at its next plan
+        return super().destroy_node()
 
 
 def _spin(node: PlannerNode) -> None:
-    executor = MultiThreadedExecutor(num_threads=2)
+    # plan_path, a running search, the immediate ERROR_BUSY answers and parameter services
+    executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
     spin_until_signal(executor)
 

@@ -1,4 +1,5 @@
 """Placement search on a stand-in planner with a known energy field (analytic oracle)."""
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -6,6 +7,7 @@ import pytest
 from irb_description.path import ArcPath, CirclePath, joint_path, path_from_spec
 from scipy.spatial.transform import Rotation
 
+from irb_planning import place_cli
 from irb_planning.evaluator import LimitSet, evaluate
 from irb_planning.placement import Region, certificate, placement_request, plot_map, search
 from irb_planning.request import ERROR_UNREACHABLE, PlanError, PlanRequest
@@ -168,3 +170,14 @@ def test_tilted_thesis_circle_found_and_confirmed_by_an_independent_replan(plann
     flat = played(PlanRequest(duration=T), CirclePath(centre, 0.15))
     assert tilted == pytest.approx(res.best_energy, rel=2e-3)
     assert tilted < flat
+
+
+def test_offline_cli_writes_the_refused_points_when_nothing_is_reachable(tmp_path, capsys):
+    js = tmp_path / 'p.json'
+    code = place_cli.main(['--lo', '2', '0', '0.13', '--hi', '2', '0.2', '0.13', '--n', '1',
+                           '2', '1', '--json', str(js), '--plot', str(tmp_path / 'p.png')])
+    assert code == 1 and 'no reachable placement' in capsys.readouterr().err
+    data = json.loads(js.read_text())
+    assert data['best_center'] is None and len(data['refused']) == 2
+    assert all('unreachable' in r for r in data['refused'].values())
+    assert not (tmp_path / 'p.png').exists()
