@@ -296,7 +296,8 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
     import time
     from dataclasses import replace
 
-    from irb_planning.placement import Region, placement_request, plot_map, search
+    from irb_planning.placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region,
+                                        placement_request, plot_map, search)
     from irb_planning.planner import Planner, PlannerSettings
     from irb_planning.request import PlanError, PlanRequest
     pl = cfg['placement']
@@ -307,7 +308,8 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
     center = np.asarray(cfg['center_m'], float)
     t0 = time.perf_counter()
     planner = Planner(settings=PlannerSettings(friction_map_dirs=(
-        (str(Path(friction_map).resolve().parent),) if friction_map else ())))
+        (str(Path(friction_map).resolve().parent),) if friction_map else ()),
+        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
     task = PlanRequest(radius=float(cfg['radius_m']), direction=1,
                        duration=float(cfg['circle_duration_s']),
                        grid_size=int(cfg['planner_grid']),

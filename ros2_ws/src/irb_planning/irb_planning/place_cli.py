@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from .placement import Region, plot_map, search
+from .placement import PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, plot_map, search
 from .request import ENERGY_MODELS, PlanRequest
 
 
@@ -184,8 +184,9 @@ def main(args=None):
         return 2
     if a.node:
         return ask_node(a, region, args)
-    from .planner import Planner
-    planner = Planner()
+    from .planner import Planner, PlannerSettings
+    planner = Planner(settings=PlannerSettings(
+        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
     task = PlanRequest(radius=a.radius, direction=a.direction, duration=a.duration,
                        energy_model=a.energy_model, grid_size=a.grid,
                        start_angle=a.start_angle, friction_map=a.friction_map)

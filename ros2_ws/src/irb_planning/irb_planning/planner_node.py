@@ -36,7 +36,8 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from . import messages
-from .placement import placement_request, plot_map, search
+from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, placement_request, plot_map,
+                        search)
 from .planner import Planner, PlannerSettings, request_error_code
 from .request import PlanError, validate
 
@@ -147,7 +148,8 @@ class PlannerNode(Node):
         if len(self.place['place_grid_points']) != 3:
             raise ValueError('place_grid_points must be 3 numbers (x, y, z)')
         self.place_planner = Planner(self.planner.model.copy(), dataclasses.replace(
-            settings, cache_size=int(self.place['place_cache_size'])))
+            settings, cache_size=int(self.place['place_cache_size']),
+            min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
         self._place_lock = threading.Lock()
         self._place_state = ''            # what the running search is doing (for ERROR_BUSY)
         self._stopping = threading.Event()

@@ -74,3 +74,25 @@ def test_next_plan_starts_from_the_learned_tightening_and_stays_valid():
     # this duration: the energies differ by the limit's effect only
     assert second.evaluation.energy == pytest.approx(ref.evaluation.energy, rel=5e-3)
     assert second.iterations < ref.iterations
+
+
+@pytest.mark.slow
+def test_far_requests_skip_only_the_time_optimal_check():
+    """min_duration_check_factor: a 10 s circle plan at N = 40 does not play the bang-bang
+    profile; the plan returned is the same and checked in full. Oracle: the default planner
+    (checks the time-optimal profile) on the same request."""
+    req = PlanRequest(duration=10.0, grid_size=40)
+    ref = Planner().plan(req)
+    quick = Planner(settings=PlannerSettings(min_duration_check_factor=1.5))
+    got = quick.plan(req)
+    assert any(n.startswith('min_duration is the optimiser') for n in got.notes)
+    assert not any(n.startswith('min_duration is the optimiser') for n in ref.notes)
+    assert got.verification.ok and not got.evaluation.violations
+    assert got.evaluation.energy == pytest.approx(ref.evaluation.energy, rel=1e-6)
+    # unchecked, it can only be shorter than the checked one (tightening slows it down)
+    assert got.min_duration <= ref.min_duration * (1 + 1e-9)
+    assert got.min_duration >= 0.9 * ref.min_duration
+    # near the time optimum the full check runs (and a too-short request is refused by it)
+    near = quick.plan(PlanRequest(duration=1.2 * ref.min_duration, grid_size=40))
+    assert not any(n.startswith('min_duration is the optimiser') for n in near.notes)
+    assert near.min_duration == pytest.approx(ref.min_duration, rel=1e-9)

@@ -1,0 +1,58 @@
+"""Placement search time with and without checking the time-optimal profile of far requests
+(issue 17 goal: one task and duration searched in <= 60 s on 2 cores).
+
+    python ros2_ws/src/irb_planning/benchmarks/bench_search_time.py [--min-step 0.2]
+
+The main job's search (config/thesis_run.yaml of irb_bringup: the 10 s thesis circle, centre
+box 0.4 x 0.8 x 0.6 m around the thesis centre, 3 x 3 x 3 map on a theta grid of 20, the best
+point re-planned on the full grid, compass search to --min-step [m]) run twice in one process,
+one after the other: with the default planner (min_duration_check_factor 0: the time-optimal
+profile of every placement is played and checked) and with the search's planner
+(placement.PLACEMENT_MIN_DURATION_CHECK_FACTOR). Wall time, plans, best, and the two maps
+compared point by point. Writes results/search_time.json (--name for another file).
+"""
+import argparse
+import os
+import time
+
+import numpy as np
+from _common import dump
+
+from irb_planning.placement import PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, search
+from irb_planning.planner import Planner, PlannerSettings
+from irb_planning.request import PlanRequest
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--min-step', type=float, default=0.2, help='compass search end [m]')
+    ap.add_argument('--refine', type=int, default=1)
+    ap.add_argument('--name', default='search_time')
+    a = ap.parse_args()
+    region = Region(np.array([0.4, -0.4, -0.17]), np.array([0.8, 0.4, 0.43]))
+    task = PlanRequest(radius=0.15, direction=1, duration=10.0)
+    out = {'load_average_before': os.getloadavg(), 'min_step_m': a.min_step,
+           'refine': a.refine, 'grid': [3, 3, 3], 'coarse_grid': 20}
+    maps = {}
+    for name, f in (('time_optimal_checked', 0.0),
+                    ('far_check_skipped', PLACEMENT_MIN_DURATION_CHECK_FACTOR)):
+        pl = Planner(settings=PlannerSettings(min_duration_check_factor=f))
+        t0 = time.perf_counter()
+        r = search(pl, task, region, (3, 3, 3), 20, a.refine, a.min_step,
+                   progress=lambda s: None)
+        maps[name] = r.energy.ravel()
+        out[name] = {'factor': f, 'wall_s': time.perf_counter() - t0,
+                     'best_J': r.best_energy, 'best_center_m': r.best_center.tolist(),
+                     'plans': r.evaluations, 'refused': len(r.reasons)}
+        print(name, out[name], flush=True)
+    m1, m2 = maps['time_optimal_checked'], maps['far_check_skipped']
+    out['same_refusals'] = bool(np.array_equal(np.isnan(m1), np.isnan(m2)))
+    out['map_max_rel_diff'] = float(np.nanmax(np.abs(m1 - m2) / m1))
+    out['speed_ratio'] = (out['time_optimal_checked']['wall_s']
+                          / out['far_check_skipped']['wall_s'])
+    out['load_average_after'] = os.getloadavg()
+    dump(a.name, out)
+
+
+if __name__ == '__main__':
+    main()
