@@ -110,21 +110,25 @@ class ElectricalModel:
         """Electrical energy [J] over samples t (M,) (trapezoidal rule in time)."""
         return float(np.trapezoid(self.power(tau, qd, mode), np.asarray(t, float)))
 
-    def breakdown(self, t, tau, qd) -> dict:
-        """Energies [J] over t: 'mechanical' int sum |tau qd|, 'copper', 'gear_loss',
-        'drive_loss' (incl. idle), 'standby', and 'total_<mode>' for every bus mode."""
-        t = np.asarray(t, float)
+    def _axis_flows(self, tau, qd):
+        """Per axis and sample [W]: joint power P_j = tau qd, gearbox input P_g, copper loss
+        P_cu, motor electrical power P_e = P_g + P_cu and the axis's bus power P_ax."""
         tau = np.asarray(tau, float)
         qd = np.asarray(qd, float)
-        integ = lambda p: float(np.trapezoid(p, t))  # noqa: E731
         pj = tau * qd
         s = (pj >= 0).astype(float)
         em, eg = self._v('gear_efficiency_motoring'), self._v('gear_efficiency_generating')
         pg = s * pj / em + (1 - s) * eg * pj
         taum = tau / self._v('gear_ratio') * (s / em + (1 - s) * eg)
         pcu = self._v('resistance') * (taum / self._v('torque_constant')) ** 2
-        pe = pg + pcu
-        pax = self.axis_power(tau, qd)
+        return pj, pg, pcu, pg + pcu, self.axis_power(tau, qd)
+
+    def breakdown(self, t, tau, qd) -> dict:
+        """Energies [J] over t: 'mechanical' int sum |tau qd|, 'copper', 'gear_loss',
+        'drive_loss' (incl. idle), 'standby', and 'total_<mode>' for every bus mode."""
+        t = np.asarray(t, float)
+        integ = lambda p: float(np.trapezoid(p, t))  # noqa: E731
+        pj, pg, pcu, pe, pax = self._axis_flows(tau, qd)
         out = {'mechanical': integ(np.abs(pj).sum(axis=-1)),
                'copper': integ(pcu.sum(axis=-1)),
                'gear_loss': integ(np.abs(pg - pj).sum(axis=-1)),
@@ -155,17 +159,8 @@ class ElectricalModel:
         if mode not in BUS_MODES:
             raise ValueError(f'bus mode {mode!r} unknown; one of {list(BUS_MODES)}')
         t = np.asarray(t, float)
-        tau = np.asarray(tau, float)
-        qd = np.asarray(qd, float)
         integ = lambda p: float(np.trapezoid(p, t))  # noqa: E731
-        pj = tau * qd
-        s = (pj >= 0).astype(float)
-        em, eg = self._v('gear_efficiency_motoring'), self._v('gear_efficiency_generating')
-        pg = s * pj / em + (1 - s) * eg * pj
-        taum = tau / self._v('gear_ratio') * (s / em + (1 - s) * eg)
-        pcu = self._v('resistance') * (taum / self._v('torque_constant')) ** 2
-        pe = pg + pcu
-        pax = self.axis_power(tau, qd)
+        pj, pg, pcu, pe, pax = self._axis_flows(tau, qd)
         idle = np.broadcast_to(self._v('drive_idle_power'), pax.shape)
         net = pax.sum(axis=-1)
         surplus = np.maximum(-net, 0.0)
