@@ -89,6 +89,17 @@ def test_place_finds_the_best_shows_refused_points_and_keeps_plan_path_serving(
     plan = client.create_client(PlanPath, 'plan_path')
     assert place.wait_for_service(timeout_sec=30.0) and plan.wait_for_service(timeout_sec=30.0)
 
+    # the search is held inside its first plan until plan_path has answered: if plan_path
+    # waited for the search (one callback group, too few executor threads, one lock), it
+    # would not answer and the wait below would time out. (Without the gate the test raced:
+    # since the search's planner skips the time-optimal check, this 3-point search can end
+    # before a 4 s plan is answered.)
+    gate, inner = threading.Event(), server.place_planner.plan
+
+    def held(request):
+        gate.wait(timeout=TIMEOUT)
+        return inner(request)
+    server.place_planner.plan = held
     running = place.call_async(_place())
     _spin_until(executor, lambda: server.place_running)
     # a second search while one runs: refused at once, not queued
@@ -102,6 +113,7 @@ def test_place_finds_the_best_shows_refused_points_and_keeps_plan_path_serving(
     planned = _wait(executor, plan.call_async(req))
     assert planned.success, planned.message
     assert not running.done(), 'the plan should be answered before the search ends'
+    gate.set()
     resp = _wait(executor, running)
     assert resp.success, resp.message
     assert resp.error_code == PlaceTask.Response.ERROR_NONE
