@@ -113,6 +113,7 @@ class _Entry:
         self.fourier_nodes = None
         self.bound: EnergyBound | None = None
         self.min_duration: dict[tuple, tuple] = {}
+        self.min_duration_unchecked: dict[tuple, float] = {}   # [s], see min_duration
         self.tightened: dict[tuple, dict] = {}   # per objective kind, see _solve_checked
         self.lock = threading.Lock()
 
@@ -369,15 +370,24 @@ class Planner:
         req = replace(base, duration=0.0, time_weight=1.0,
                       energy_weight=TIME_OBJECTIVE_ENERGY_WEIGHT)
         factor = self.settings.min_duration_check_factor
+        first = []              # a solve made for the unchecked answer, used once below
         if factor > 0 and far > 0:
-            res = entry.transcription.solve(req, warm=False)
-            if (res.stats.success and res.profile is not None
-                    and far >= factor * res.profile.duration):
-                return res.profile.duration, None
+            with entry.lock:
+                t_opt = entry.min_duration_unchecked.get(key)
+            if t_opt is None:
+                res = entry.transcription.solve(req, warm=False)
+                first.append(res)
+                if res.stats.success and res.profile is not None:
+                    t_opt = res.profile.duration
+                    with entry.lock:
+                        entry.min_duration_unchecked[key] = t_opt
+            if t_opt is not None and far >= factor * t_opt:
+                return t_opt, None
+
+        def solve(r):
+            return first.pop() if first else entry.transcription.solve(r, warm=False)
         try:
-            out = self._solve_checked(req, checked, check,
-                                      lambda r: entry.transcription.solve(r, warm=False), 0.0,
-                                      band)
+            out = self._solve_checked(req, checked, check, solve, 0.0, band)
         except PlanError as exc:
             infeasible = 'cannot all be met' in exc.message
             raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
