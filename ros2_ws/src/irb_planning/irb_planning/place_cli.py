@@ -126,31 +126,13 @@ def summary(resp) -> str:
 
 def ask_node(a, region: Region, args=None) -> int:
     """--node: call the service, print, write the outputs; the exit code."""
-    import rclpy
-    from irb_description.node_main import refuse_insecure_start
     from irb_interfaces.srv import PlaceTask
-    from rclpy.executors import SingleThreadedExecutor
 
     from .messages import placement_from_msg
+    from .service_call import call_service
     request = build_request(a, region)
-    refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
-    rclpy.init(args=args)
-    node = rclpy.create_node('place_cli')
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        client = node.create_client(PlaceTask, a.service)
-        if not client.wait_for_service(timeout_sec=min(a.timeout, 30.0)):
-            print(f'service {a.service} not available', file=sys.stderr)
-            return 2
-        print(f'asking {a.service} (the node logs the progress; waiting up to {a.timeout:g} s)',
-              flush=True)
-        future = client.call_async(request)
-        executor.spin_until_future_complete(future, timeout_sec=a.timeout)
-        if not future.done():
-            print(f'no answer within {a.timeout:g} s', file=sys.stderr)
-            return 2
-        resp = future.result()
+
+    def answered(resp) -> int:
         if not resp.success:
             print(f'placement refused (error {resp.error_code}): {resp.message}')
             if len(resp.map_energy):               # nothing reachable: the map says why
@@ -161,12 +143,9 @@ def ask_node(a, region: Region, args=None) -> int:
         print(summary(resp))
         write_outputs(a, placement_from_msg(resp))
         return 0
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    return call_service(PlaceTask, a.service, request, a.timeout, 'place_cli', answered, args,
+                        asking=f'asking {a.service} (the node logs the progress; waiting up '
+                               f'to {a.timeout:g} s)')
 
 
 def main(args=None):

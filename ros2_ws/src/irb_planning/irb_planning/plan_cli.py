@@ -28,11 +28,11 @@ import rclpy
 from geometry_msgs.msg import Point
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlanPath
-from rclpy.executors import SingleThreadedExecutor
 
 from .costs import time_weight
 from .messages import path_msg_from_spec
 from .plot import plot_plan
+from .service_call import call_service
 
 
 def parse_args(argv):
@@ -158,24 +158,8 @@ def main(args=None):
     except ValueError as exc:
         print(f'plan: {exc}', file=sys.stderr)
         return 1
-    from irb_description.node_main import refuse_insecure_start
-    refuse_insecure_start()        # ROS_SECURITY_ENABLE=true is never ignored
-    rclpy.init(args=args)
-    node = rclpy.create_node('plan_cli')
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    code = 0
-    try:
-        client = node.create_client(PlanPath, a.service)
-        if not client.wait_for_service(timeout_sec=min(a.timeout, 30.0)):
-            print(f'service {a.service} not available', file=sys.stderr)
-            return 2
-        future = client.call_async(request)
-        executor.spin_until_future_complete(future, timeout_sec=a.timeout)
-        if not future.done():
-            print(f'no answer within {a.timeout} s', file=sys.stderr)
-            return 2
-        resp = future.result()
+
+    def answered(resp) -> int:
         if not resp.success:
             print(f'planner refused (error {resp.error_code}): {resp.message}')
             return 1
@@ -190,13 +174,8 @@ def main(args=None):
                             tau, f'{a.objective}: {resp.duration:.2f} s, {resp.energy:.1f} J '
                             f'(trapezoid {resp.baseline_energy:.1f} J)')
             print(f'plot: {out}')
-    except KeyboardInterrupt:
-        code = 130
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+        return 0
+    return call_service(PlanPath, a.service, request, a.timeout, 'plan_cli', answered, args)
 
 
 if __name__ == '__main__':
