@@ -16,6 +16,8 @@ a path re-built from the request (bench_random's standard: a success that fails 
 stages: solve, 1 kHz evaluation, message building, the independent check and its parts) and
 IPOPT's own timers of that solve (function and derivative evaluations vs the rest of IPOPT,
 i.e. its linear algebra), to say where a warm plan() call's time goes.
+``--mumps-ordering``: IPOPT's mumps_pivot_order for the run (A/B against the planner's
+problem.MUMPS_ORDERING, see bench_linear_solvers.py).
 Writes results/paths.json (``--name`` to write another file).
 """
 import argparse
@@ -26,6 +28,7 @@ import numpy as np
 from _common import dump
 from irb_description.path import path_from_spec, path_spec, rectangle_path
 
+from irb_planning import problem
 from irb_planning.planner import BOUNDARY_REST, Planner, PlannerSettings, request_path
 from irb_planning.request import PlanError, PlanRequest
 from irb_planning.verify import ArmKinematics, MapFriction, PathCurve, verify_plan
@@ -138,10 +141,16 @@ def main():
     ap.add_argument('--profile', action='store_true',
                     help='profile one more warm polyline request (where the time goes)')
     ap.add_argument('--name', default='paths', help='results/<name>.json')
+    ap.add_argument('--mumps-ordering', type=int, default=None,
+                    help="IPOPT's mumps_pivot_order for this run (default: the planner's, "
+                         'problem.MUMPS_ORDERING; 7 = IPOPT\'s automatic choice)')
     ap.add_argument('--circle', action='store_true',
                     help='also the thesis circle warm at the same grid, same load (reference)')
     a = ap.parse_args()
-    out = {'grid': a.grid, 'load_average_before': os.getloadavg()}
+    if a.mumps_ordering is not None:
+        problem.MUMPS_ORDERING = a.mumps_ordering
+    out = {'grid': a.grid, 'load_average_before': os.getloadavg(),
+           'mumps_pivot_order': problem.MUMPS_ORDERING}
     spec = meander()
     path = path_from_spec(spec)
     invalid, successes = [], 0

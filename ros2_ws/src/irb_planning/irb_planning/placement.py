@@ -297,6 +297,10 @@ def plot_map(path: str, res: PlacementResult, title: str = '') -> str:
     nz = res.zs.size
     fig, axs = plt.subplots(1, nz, figsize=(4.2 * nz, 3.8), squeeze=False)
     vmin, vmax = np.nanmin(res.energy), np.nanmax(res.energy)
+    # the star on the one panel nearest the best centre's height (refinement moves it off
+    # the grid's levels; 'within half a spacing' put it on two panels or on none)
+    k_best = (int(np.argmin(np.abs(np.asarray(res.zs) - res.best_center[2])))
+              if res.best_center is not None else -1)
     for k in range(nz):
         ax = axs[0, k]
         refused = np.isnan(res.energy[:, :, k, :])
@@ -315,10 +319,9 @@ def plot_map(path: str, res: PlacementResult, title: str = '') -> str:
             if np.isfinite(v):
                 ax.annotate(f'{v:.0f}', (x, y), ha='center', va='center', fontsize=7,
                             color='white')
-        if res.best_center is not None and abs(res.best_center[2] - res.zs[k]) <= (
-                0.5 * (res.zs[1] - res.zs[0]) if nz > 1 else np.inf):
+        if res.best_center is not None and k == k_best:
             ax.plot(res.best_center[0], res.best_center[1], '*', color='orange', ms=16,
-                    label=f'best {res.best_energy:.1f} J')
+                    label=f'best {res.best_energy:.1f} J at z = {res.best_center[2]:.3f} m')
         ax.set_title(f'z = {res.zs[k]:.2f} m')
         ax.set_xlabel('centre x [m]')
         ax.set_ylabel('centre y [m]')

@@ -268,7 +268,6 @@ class PlannerNode(Node):
                               f'refused: {"; ".join(refused[:2])})', 'placement')
         nodes = self.place_planner.node_samples(res.best_plan)
         messages.fill_place_response(response, res, nodes)
-        response.map_png = png
         response.message = (
             f'best placement centre {np.round(res.best_center, 4).tolist()} m, rotation '
             f'{np.degrees(res.best_rotation):.1f} deg, tilt '
