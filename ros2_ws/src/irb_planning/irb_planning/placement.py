@@ -28,6 +28,14 @@ between them and their neighbours escapes it. The map is planned on the coarse t
 the best on the full one; their discretisations differ (0.2 % at the thesis circle). The
 certificate runs per orientation over the centre axes: it claims nothing about the
 rotations and tilts between their grid values.
+
+Bounds (``search(bounds=True)``): the map's energies are local optima of a nonconvex NLP; the
+planner's convex relaxation (``Planner.bound``, baselines.EnergyBound) gives at each planned
+map point a lower bound on every timing of that placement (on the same theta grid), and one at
+the best placement on the full grid. Their lowest value over the map is what no timing at any
+planned point can beat: a sound statement at the points, up to the theta discretisation, and
+none between them (the bounds are as steep as the energies, and the Lipschitz argument above
+would need a spacing of millimetres).
 """
 from __future__ import annotations
 
@@ -141,6 +149,12 @@ class PlacementResult:
     measure: str = 'mechanical'
     tilts: np.ndarray | None = None       # (M, 2) [rad], tilt about x and y per orientation
     best_tilt: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    # with ``bounds``: the convex lower bound [J] of every timing at each planned map point
+    # (same grid, NaN where refused or not computed), their lowest value, and the bound at
+    # the best placement on the full grid
+    lower_bounds: np.ndarray | None = None
+    grid_bound_floor: float = float('nan')
+    best_lower_bound: float = float('nan')
 
 
 def plan_energy(result, energy_model: str) -> float:
@@ -154,9 +168,11 @@ def plan_energy(result, energy_model: str) -> float:
 def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
            coarse_grid: int = 40, refine: int = 2, min_step: float = 0.01,
            progress: Callable[[str], None] = print,
-           min_tilt_step: float = np.radians(2.0)) -> PlacementResult:
+           min_tilt_step: float = np.radians(2.0), bounds: bool = False) -> PlacementResult:
     """Grid over the region, refine the best points (module docstring). ``task`` holds the
-    radius, direction, duration, energy_model (its centre and start angle are replaced)."""
+    radius, direction, duration, energy_model (its centre and start angle are replaced).
+    ``bounds``: also the planner's convex lower bound (``Planner.bound``) at every planned
+    map point and at the best placement (module docstring, "Bounds")."""
     t0 = time.perf_counter()
     lo, hi = np.asarray(region.lo, float), np.asarray(region.hi, float)
     axes = [np.linspace(lo[d], hi[d], n[d]) if hi[d] > lo[d] else np.array([lo[d]])
@@ -165,6 +181,7 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
     rots, tilts = orient[:, 0], orient[:, 1:]
     E = np.full((axes[0].size, axes[1].size, axes[2].size, orient.shape[0]), np.nan)
     reasons = {}
+    LB = np.full(E.shape, np.nan) if bounds else None
     model = task.energy_model or 'mechanical'
     total = E.size
     evals = 0
@@ -176,6 +193,15 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
                       objective='energy')
         res = planner.plan(req)
         return plan_energy(res, model), res
+
+    def lower_bound(center, o, grid) -> float:
+        req = replace(placement_request(task, center, *o), grid_size=grid,
+                      objective='energy')
+        try:
+            return float(planner.bound(req, task.duration))
+        except PlanError as exc:
+            progress(f'bound at {np.round(center, 3).tolist()} failed: {exc.message[:80]}')
+            return float('nan')
 
     def describe(o):
         text = f'rotation {np.degrees(o[0]):.0f} deg'
@@ -189,6 +215,9 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
         try:
             E[idx], _ = run(c, orient[idx[3]], coarse_grid)
             msg = f'{E[idx]:.2f} J'
+            if bounds:
+                LB[idx] = lower_bound(c, orient[idx[3]], coarse_grid)
+                msg += f', bound {LB[idx]:.2f} J'
         except PlanError as exc:
             reasons[idx] = f'error {exc.code}: {exc.message[:80]}'
             msg = 'refused: ' + reasons[idx]
@@ -248,6 +277,14 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
         if not improved:
             step = step / 2
     c_best = z_best[:3]
+    extra = {}
+    if bounds:
+        floor = float(np.nanmin(LB)) if np.any(np.isfinite(LB)) else float('nan')
+        lb_best = lower_bound(c_best, o_best, task.grid_size)
+        extra = dict(lower_bounds=LB, grid_bound_floor=floor, best_lower_bound=lb_best)
+        progress(f'convex bounds: lowest {floor:.2f} J over {int(np.isfinite(LB).sum())} '
+                 f'planned map points; {lb_best:.2f} J at the best placement (its plan '
+                 f'{e_best:.2f} J)')
     bound, lip, covered, cells = certificate(axes, E)
     gap = 100 * (e_best - bound) / e_best
     progress(f'best {np.round(c_best, 3).tolist()} {describe(o_best)}: '
@@ -258,7 +295,7 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
                            float(o_best[0]), float(e_best), res_best, float(bound), float(gap),
                            lip, cells_covered=covered, cells_total=cells, evaluations=evals,
                            wall_time=time.perf_counter() - t0, measure=model, tilts=tilts,
-                           best_tilt=np.array(o_best[1:], float))
+                           best_tilt=np.array(o_best[1:], float), **extra)
 
 
 def certificate(axes, E: np.ndarray) -> tuple[float, np.ndarray, int, int]:

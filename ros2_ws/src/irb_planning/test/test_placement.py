@@ -1,5 +1,6 @@
 """Placement search on a stand-in planner with a known energy field (analytic oracle)."""
 import json
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -170,6 +171,27 @@ def test_tilted_thesis_circle_found_and_confirmed_by_an_independent_replan(plann
     flat = played(PlanRequest(duration=T), CirclePath(centre, 0.15))
     assert tilted == pytest.approx(res.best_energy, rel=2e-3)
     assert tilted < flat
+
+
+def test_convex_bounds_at_the_map_points_are_below_every_timing_there(planner):
+    """search(bounds=True): at each planned map point the convex bound lies below the
+    search's own optimum there and below the trapezoid's energy at that placement (a timing
+    the bound knows nothing of, planned and judged separately); refused points have none;
+    the floor is the map's lowest bound and the best placement's bound is below its plan."""
+    task = PlanRequest(duration=10.0)
+    region = Region(np.array([0.5, 0.0, 0.13]), np.array([1.3, 0.0, 0.13]))
+    lines = []
+    res = search(planner, task, region, (3, 1, 1), coarse_grid=20, refine=1, min_step=0.4,
+                 progress=lines.append, bounds=True)
+    E, LB = res.energy.ravel(), res.lower_bounds.ravel()
+    assert np.array_equal(np.isnan(E), np.isnan(LB)) and np.isnan(E[-1]), lines
+    for x, e, lb in zip(res.xs[:2], E[:2], LB[:2]):
+        req = placement_request(task, [x, 0.0, 0.13])
+        trap = planner.plan(replace(req, objective='trapezoid', grid_size=20))
+        assert 0.0 < lb <= e and lb <= trap.verification.energy, (x, lb, e)
+    assert res.grid_bound_floor == np.nanmin(LB)
+    assert 0.0 < res.best_lower_bound <= res.best_energy
+    assert any(line.startswith('convex bounds: lowest') for line in lines)
 
 
 def test_offline_cli_writes_the_refused_points_when_nothing_is_reachable(tmp_path, capsys):
