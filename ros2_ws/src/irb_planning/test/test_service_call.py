@@ -48,17 +48,24 @@ def server():
     rclpy.try_shutdown(context=ctx)
 
 
-def test_a_server_that_goes_away_ends_the_wait_with_one_line_and_exit_2(server, capsys):
-    node, srv, ns, entered, release = server
+def _call_in_thread(ns: str, code: int):
+    """The client's call in a thread (it blocks): the thread and where it leaves its exit
+    code and the time it ended."""
     result = {}
 
     def call():
         result['code'] = service_call.call_service(
             PlanPath, f'{ns}/plan_path', PlanPath.Request(), CLIENT_TIMEOUT, 'call_test',
-            lambda response: 0)
+            lambda response: code)
         result['end'] = time.monotonic()
     caller = threading.Thread(target=call, daemon=True)
     caller.start()
+    return caller, result
+
+
+def test_a_server_that_goes_away_ends_the_wait_with_one_line_and_exit_2(server, capsys):
+    node, srv, ns, entered, release = server
+    caller, result = _call_in_thread(ns, 0)
     assert entered.wait(BOUND), 'the request never reached the server'
     assert caller.is_alive()                 # the client waits for the answer
     gone = time.monotonic()
@@ -77,14 +84,7 @@ def test_a_server_that_answers_is_not_taken_for_gone(server):
     """The watch must not end a call whose server is there and answers late: the answer
     comes after several watch periods and is the one returned."""
     node, srv, ns, entered, release = server
-    result = {}
-
-    def call():
-        result['code'] = service_call.call_service(
-            PlanPath, f'{ns}/plan_path', PlanPath.Request(), CLIENT_TIMEOUT, 'call_test',
-            lambda response: 7)
-    caller = threading.Thread(target=call, daemon=True)
-    caller.start()
+    caller, result = _call_in_thread(ns, 7)
     assert entered.wait(BOUND)
     # hold the answer over more than three watch periods and the grace (measured by the
     # client's own clock: the wait below is on the caller, bounded)
