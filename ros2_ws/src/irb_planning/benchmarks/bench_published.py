@@ -9,7 +9,9 @@ splits the electrical energy of the played trajectory (the independent check's s
 joint work, gearbox, copper, drive conversion and idle losses, brake resistor, regeneration
 loss (and what is returned). The shares [%] of each part sit next to the published figures of
 PUBLISHED (full source, where in the paper, whether read in the source itself) in
-results/published.json. ``--quick``: 10 s only.
+results/published.json, with the standby share re-evaluated at other standby powers
+(``standby_sweep``: 150, 250, 270, 400 W; exact, as the standby energy of a fixed duration is a
+constant). ``--quick``: 10 s only.
 """
 import argparse
 import json
@@ -81,6 +83,62 @@ PUBLISHED = [
          where='abstract and first paragraph of the introduction',
          read='read in the stored copy at the url (venue and year not shown there)',
          compare_with=None),
+    # --- added in the second search session (issue 17): still no standby or copper SHARE of a
+    # cycle, but a vendor's controller figure of this payload class and more savings figures
+    dict(quantity='controller cabinet power (vendor ceiling, compact controller of another make)',
+         figure='rated power input 2 kVA; thermal power dissipation max. 400 W (rated supply '
+         'voltage 200-230 V AC, single- or two-phase)',
+         authors='KUKA Roboter GmbH', title='KR C4 compact, Specification (Spez KR C4 compact '
+         'V10), section 6.3 Connection conditions, p. 54 of 93', venue='vendor documentation',
+         year=2018, doi=None, url='https://www.easymanua.ls/kuka/kr-c4-compact/manual?p=54',
+         robot='KUKA KR C4 compact robot controller (not an ABB IRC5); which robots it '
+         'drives is not on the page read', payload_class=None,
+         cycle='not a cycle: the maximum heat the cabinet dissipates, i.e. a ceiling for its '
+         'own losses at full load, not a standby measurement',
+         where='section 6.3, table of connection conditions', read='figure read in the '
+         'stored page (issued 20.04.2018)', compare_with='rest_power_w'),
+    dict(quantity='energy saving of optimised motion at a fixed production time',
+         figure='energy consumption of individual robots reduced by 15 to 35 percent, of groups '
+         'of robots by up to 40 percent, by changing the speed and sequence of the movements '
+         'while keeping the production time; depending on the production process up to fifty '
+         'percent of the electricity is attributed to the robots',
+         authors='researchers of Chalmers University of Technology (names not in the text '
+         'read), as reported by two news articles', title=None, venue='news reports of results '
+         'presented at the International Conference on Automation Science and Engineering in '
+         'Gothenburg',
+         year=None, doi=None,
+         url='https://www.trendsderzukunft.de/smartere-roboterbewegungen-helfen-energie-zu-'
+         'sparen/ ; https://www.lrytas.lt/english/business-tribune/2022/10/10/news/-andrius-'
+         'kochanskas-ceo-of-sba-company-robotex-24829687', robot='not named in the text read',
+         payload_class=None, cycle='multi-robot stations, fixed production time',
+         where='news text', read='figures read in the two stored news pages (secondary: the '
+         'paper itself was not reached)', compare_with='saving_vs_trapezoid_pct'),
+    dict(quantity='energy saving of trajectory optimisation (literature summary)',
+         figure='current methods can reduce energy up to 15 % for fixed start and end points '
+         '(abstract); optimising the trajectory between fixed start and end points can save up '
+         'to 15-30 % of energy (introduction, citing its refs [3, 4])',
+         authors='V. Petrichenko, L. Lokstein, G. Thiele, K. Haninger (Fraunhofer IPK)',
+         title='Energy Consumption in Robotics: A Simplified Modeling Approach',
+         venue='arXiv 2411.03194', year=2024, doi=None,
+         url='https://ar5iv.labs.arxiv.org/html/2411.03194', robot='collaborative robot '
+         '(their own comparison); the savings are figures of other papers',
+         payload_class=None, cycle='literature figures', where='abstract and introduction',
+         read='read in the stored text; the 15-30 % is a review statement citing other papers '
+         '(not read)', compare_with='saving_vs_trapezoid_pct'),
+    dict(quantity='yearly energy of a heavy robot (context, other class)',
+         figure='an average 200 kg payload body shop robot consumes a yearly 8 MWh (citing its '
+         'ref [7]); robots consume approximately 8 % of the total electrical energy of '
+         'production processes (citing its ref [8])',
+         authors='a thesis of the Automation research group, Chalmers University of '
+         'Technology, chapter 3 "Energy optimization of multi-robot systems" (EU project '
+         'AREUS); author, degree and year are not in the stored excerpt',
+         title=None, venue='thesis (as stored)',
+         year=None, doi=None,
+         url='https://1library.net/article/summary-energy-route-optimization-moving-devices.'
+         'qvm2l61q', robot='200 kg body shop robot', payload_class='200 kg',
+         cycle='a year of body-shop production', where='chapter 3, first page',
+         read='read in the stored excerpt; both figures are cited from other sources',
+         compare_with=None),
 ]
 
 #: the candidates of the brief whose figures could NOT be verified here: left out
@@ -100,8 +158,47 @@ NOT_VERIFIED = [
          why='only the abstract and the start of the introduction were reachable: no '
          'standby or copper-loss figure in them'),
     dict(source='ABB IRB 1600 product specification (power consumption)',
-         why='no stored copy of the specification found (only unrelated manual pages)'),
+         why='no stored copy of the specification found (only unrelated manual pages); '
+         'searched again in the second session (pages and docs corpora, the power-consumption '
+         'table and the IRC5 technical data): nothing'),
+    dict(source='A. Rassõlkin, H. Hõimoja, R. Teemets, "Energy Saving Possibilities in the '
+         'Industrial Robot IRB 1600 Control" (Tallinn University of Technology; measurements on '
+         'an IRB 1600), https://123doc.org/document/3994340-energy-saving-possibilities-in-the-'
+         'industrial-robot-irb-1600-control.htm',
+         why='the closest candidate (measurements on this very robot), but only the abstract '
+         'and the start of the introduction are in the stored text: no standby power, no '
+         'share, no venue or year read'),
+    dict(source='Garcia et al. 2018 review, Bugday & Karali 2019, Brossog et al. 2015, Riazi '
+         'et al. (CASE papers), IRC5 product specification / technical data',
+         why='searched by title, authors and content in the second session: no stored text '
+         'with a standby power or share, or a copper-loss share'),
+    dict(source='MDPI reviews: Energies 17(3) 641 (2024, "Selected Issues, Methods, and Trends '
+         'in the Energy Consumption of Industrial Robots"), Machines 13(7) 542 (2025, "A '
+         'Scoping Review of Energy Consumption in Industrial Robotics")',
+         why='only front matter, the abstract and the table of contents were reachable'),
 ]
+
+#: standby powers [W] at which the standby share of every row is re-evaluated (exact: for a
+#: fixed duration the standby energy is P_sb T, a constant the optimum does not depend on)
+STANDBY_SWEEP_W = (150.0, 250.0, 270.0, 400.0)
+
+
+def standby_share_at(energy_j: dict, p_model: float, p_new: float) -> float:
+    """Standby share [%] of a cycle whose flows ``energy_j`` (ElectricalModel.flows: 'standby',
+    'total') were computed with standby power ``p_model`` [W], had the standby been ``p_new``:
+    E_sb' = E_sb p_new / p_model, E' = E - E_sb + E_sb'. Every other part is unchanged."""
+    sb = energy_j['standby'] * p_new / p_model
+    return 100.0 * sb / (energy_j['total'] - energy_j['standby'] + sb)
+
+
+def standby_sweep(rows: list, p_model: float, powers=STANDBY_SWEEP_W) -> list:
+    """Per row and bus mode: the standby share [%] at each standby power of ``powers``."""
+    return [dict(duration_s=r['duration_s'], plan=r['plan'], mode=m,
+                 standby_pct={f'{p:g}': standby_share_at(d['energy_j'], p_model, p)
+                              for p in powers})
+            for r in rows for m, d in r['by_mode'].items()]
+
+
 def cycle_shares(model, t, tau, qd, modes=BUS_MODES) -> dict:
     """Per bus mode: 'energy_j' (ElectricalModel.flows of the samples t (M,), tau, qd (M, n))
     and 'shares_pct' (their percentages of the mode's total)."""
@@ -218,10 +315,21 @@ def main():
             played='the planned trajectory message as played by quintic interpolation '
             '(PlanResult.verification samples)'),
         rows=rows, comparison=ours_vs_published(
-            rows, PUBLISHED, {'placement_spread_pct': placement_spread(RESULTS / 'energy.json')}),
-        standby_and_copper_shares_published='none verified: no standby or copper-loss share '
-        'of a robot of this class could be read in a stored source in this session (see '
-        'not_verified); ours are given without a published counterpart',
+            rows, PUBLISHED, {'placement_spread_pct': placement_spread(RESULTS / 'energy.json'),
+                              'rest_power_w': dict(
+                                  value=rows[0]['rest_power_w'], duration_s=None,
+                                  plan='standing still at the circle start (motors on, brakes '
+                                  'released, holding against gravity)', mode='shared')}),
+        standby_sweep=dict(
+            note='standby share [%] of each row had the standby power been P_sb [W] (the '
+            'planner model assumes 250 W, the simulated plant 270 W); exact for fixed '
+            'durations, every other part unchanged', powers_w=list(STANDBY_SWEEP_W),
+            rows=standby_sweep(rows, float(model.standby_power))),
+        standby_and_copper_shares_published='none verified after two search sessions: no '
+        'standby or copper-loss share of a robot of this class could be read in a stored '
+        'source (see not_verified). The only watt figure of this class read is a vendor '
+        'ceiling (KUKA KR C4 compact: thermal dissipation max. 400 W), which our 284 W at '
+        'rest does not exceed; ours are given without a published share to compare',
         not_verified=NOT_VERIFIED,
         wall_s=time.perf_counter() - t_start,
         load_average=dict(start=load0, end=os.getloadavg()))

@@ -1,5 +1,6 @@
 """benchmarks/bench_published.py's core (cycle_shares, ours_vs_published) on given trajectories,
 against an independent computation; no planner run (fast)."""
+import dataclasses
 import importlib.util
 from pathlib import Path
 
@@ -102,3 +103,42 @@ def test_placement_spread_reads_reachable_points_only(bench, tmp_path):
     out = bench.ours_vs_published([], [dict(compare_with='placement_spread_pct')],
                                   {'placement_spread_pct': got})
     assert out[0]['ours_range'] == [got['value'], got['value']]
+
+
+def test_standby_share_at_is_exact_against_a_recomputed_model(bench):
+    """Re-evaluating the standby share at another P_sb equals recomputing the flows with a model
+    whose only change is P_sb (the standby energy of a fixed duration is additive)."""
+    m = load_electrical().axes(3)
+    t, tau, qd = _played_like(seed=5)
+    e = bench.cycle_shares(m, t, tau, qd, modes=('shared',))['shared']['energy_j']
+    for p in (150.0, 400.0):
+        m2 = dataclasses.replace(m, standby_power=p)
+        ref = bench.cycle_shares(m2, t, tau, qd, modes=('shared',))['shared']['shares_pct']
+        assert bench.standby_share_at(e, m.standby_power, p) == pytest.approx(
+            ref['standby'], rel=1e-12)
+    assert bench.standby_share_at(e, m.standby_power, m.standby_power) == pytest.approx(
+        100 * e['standby'] / e['total'], rel=1e-12)
+
+
+def test_standby_sweep_covers_every_row_and_mode(bench):
+    rows = [dict(duration_s=10.0, plan='trapezoid',
+                 by_mode={'shared': {'energy_j': {'standby': 2500.0, 'total': 2866.6}},
+                          'none': {'energy_j': {'standby': 2500.0, 'total': 2870.0}}}),
+            dict(duration_s=1.0, plan='optimum_electrical_shared',
+                 by_mode={'shared': {'energy_j': {'standby': 250.0, 'total': 450.0}}})]
+    out = bench.standby_sweep(rows, 250.0, powers=(250.0, 400.0))
+    assert [(o['plan'], o['mode']) for o in out] == [
+        ('trapezoid', 'shared'), ('trapezoid', 'none'), ('optimum_electrical_shared', 'shared')]
+    assert out[0]['standby_pct']['250'] == pytest.approx(100 * 2500.0 / 2866.6)
+    assert out[2]['standby_pct']['400'] == pytest.approx(100 * 400.0 / 600.0)
+
+
+def test_published_entries_are_complete(bench):
+    """Every published figure names its source, address, where it was read and what it is
+    compared with; the not-verified list says why."""
+    keys = {'quantity', 'figure', 'authors', 'title', 'venue', 'year', 'url', 'robot', 'cycle',
+            'where', 'read', 'compare_with'}
+    for p in bench.PUBLISHED:
+        assert keys <= set(p), p.get('quantity')
+        assert p['figure'] and p['url'] and p['read'] and p['where']
+    assert all(n['source'] and n['why'] for n in bench.NOT_VERIFIED)
