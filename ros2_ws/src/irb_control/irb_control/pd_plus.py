@@ -11,7 +11,14 @@ q, qd (3,) at time t [s]:
    stiction holds the robot (thesis §6.1); a small lead (0.05 rad = 7.5 mm on the thesis
    circle) lets the feedback break stiction while the reference still waits for a robot that
    falls behind;
-   q and qd are predicted over the same Delta = n T with the reference acceleration.
+   q and qd are predicted over the same Delta = n T (``delay_prediction``): with the
+   accelerations of the n commands still in flight (the reference accelerations they were
+   computed for: those act on the plant during [t, t + Delta)), or, on the thesis circle,
+   with the reference acceleration at t + Delta (the thesis's rule, kept there to the bit).
+   The two agree where the reference acceleration is smooth; where it steps (a blend's end,
+   a trapezoid's switch) the second mispredicts qd by the step times Delta for n samples
+   (0.05 rad/s and 41 N m of wrong Kd torque on joint 1 through the 25 mm blends of the
+   rectangle at 0.25 m/s: its 0.50 mm path error peaks came from that).
 2. References q_ref, qd_ref, qdd_ref interpolated from the theta-profile at the predicted theta
    (or from q(t + Delta) of a time trajectory in the time-driven mode, or from the 0.5 s
    quintic ramp from the pose at enable to the start of the motion).
@@ -34,6 +41,7 @@ from where the robot is; the stop reason stays readable after the stop is cleare
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,6 +54,7 @@ from irb_description.path_tracking import PathTracker
 from .profiles import PathProfile, TimeTrajectory
 
 PERIOD_S = 0.004032
+DELAY_PREDICTIONS = ('auto', 'commanded', 'reference')
 
 # Modes, equal to the constants of irb_interfaces/msg/ControllerState
 MODE_IDLE = 0
@@ -154,6 +163,10 @@ class ControllerConfig:
     max_tracking_error_rad: tuple = (0.05, 0.05, 0.05)
     end_tolerance_rad: float = 1e-3               # theta_v within this of the end: hold
     theta_max_lead_rad: float = 0.05              # progress governor, 0 = pure thesis
+    #: how q, qd are carried over the delay: 'commanded' (accelerations of the commands in
+    #: flight), 'reference' (the reference acceleration at t + Delta, the thesis's rule), or
+    #: 'auto' = 'reference' on the thesis's CirclePath, 'commanded' on every other path
+    delay_prediction: str = 'auto'
 
     def __post_init__(self):
         for name in ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad'):
@@ -164,6 +177,9 @@ class ControllerConfig:
             v = np.asarray(self.torque_limit_nm, float)
             if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError('torque_limit_nm must be 3 finite numbers > 0')
+        if self.delay_prediction not in DELAY_PREDICTIONS:
+            raise ValueError(f'delay_prediction must be one of {DELAY_PREDICTIONS}, got '
+                             f'{self.delay_prediction!r}')
         if not (self.period_s > 0 and self.prediction_samples >= 0
                 and self.ramp_min_duration_s > 0 and self.friction_blend_a > 0
                 and 0 < self.ramp_speed_fraction <= 1 and self.velocity_limit_fraction > 0):
@@ -305,6 +321,16 @@ class PdPlusController:
         # any other path: projection near the previous theta (irb_description.path_tracking)
         self._tracker = PathTracker(path) if self._circle is None else None
         self._friction_par = _parametric_friction(friction)
+        # delay compensation with the commands in flight: the reference accelerations of the
+        # last n commands sent (oldest first), n = prediction_samples; empty after enable/stop
+        dp = c.delay_prediction
+        self._commanded = (dp == 'commanded' or (dp == 'auto' and self._circle is None)) \
+            and c.prediction_samples > 0
+        n, T = c.prediction_samples, c.period_s
+        # over [t, t + n T) the command j (0 = oldest) acts during [t + j T, t + (j + 1) T):
+        # qd(t + Delta) = qd + T sum a_j, q(t + Delta) = q + Delta qd + T^2 sum (n - j - 1/2) a_j
+        self._in_flight: deque = deque(maxlen=max(n, 1))
+        self._w_pos = [T * T * (n - j - 0.5) for j in range(n)]
 
     # --- commands ------------------------------------------------------------------------
     def _transition(self, event: str) -> tuple[int | None, str]:
@@ -346,6 +372,7 @@ class PdPlusController:
         if self.pending is not None:
             self.active, self.pending = self.pending, None
         self._enable_requested = True
+        self._in_flight.clear()
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
         return True, f'enabled: {why}'
@@ -359,6 +386,7 @@ class PdPlusController:
         self.mode = MODE_STOPPED
         self._enable_requested = False
         self._prev_tau = None
+        self._in_flight.clear()
 
     @property
     def time_driven(self) -> bool:
@@ -461,12 +489,23 @@ class PdPlusController:
                 theta_dot_ref = row[0]
                 q_ref, qd_ref, qdd_ref = row[2:5], row[5:8], row[8:11]
 
-        # delay compensation of the measurement: q_p = q + d qd + d^2/2 qdd_ref, qd_p = qd + d
-        # qdd_ref; errors e = q_ref - q_p, de = qd_ref - qd_p
-        a0, a1, a2 = qdd_ref
-        c2 = 0.5 * d * d
-        p0, p1, p2 = q0 + d * w0 + c2 * a0, q1 + d * w1 + c2 * a1, q2 + d * w2 + c2 * a2
-        u0, u1, u2 = w0 + d * a0, w1 + d * a1, w2 + d * a2
+        # delay compensation of the measurement, 'reference': q_p = q + d qd + d^2/2 qdd_ref,
+        # qd_p = qd + d qdd_ref; 'commanded': the in-flight accelerations a_j instead (see
+        # __init__; until n commands are out, as 'reference'); e = q_ref - q_p, de = qd_ref - qd_p
+        fl = self._in_flight
+        if self._commanded and len(fl) == self.config.prediction_samples:
+            T = self.config.period_s
+            sv0 = sv1 = sv2 = sp0 = sp1 = sp2 = 0.0
+            for wj, (b0, b1, b2) in zip(self._w_pos, fl):
+                sv0, sv1, sv2 = sv0 + b0, sv1 + b1, sv2 + b2
+                sp0, sp1, sp2 = sp0 + wj * b0, sp1 + wj * b1, sp2 + wj * b2
+            p0, p1, p2 = q0 + d * w0 + sp0, q1 + d * w1 + sp1, q2 + d * w2 + sp2
+            u0, u1, u2 = w0 + T * sv0, w1 + T * sv1, w2 + T * sv2
+        else:
+            a0, a1, a2 = qdd_ref
+            c2 = 0.5 * d * d
+            p0, p1, p2 = q0 + d * w0 + c2 * a0, q1 + d * w1 + c2 * a1, q2 + d * w2 + c2 * a2
+            u0, u1, u2 = w0 + d * a0, w1 + d * a1, w2 + d * a2
         e = [q_ref[0] - p0, q_ref[1] - p1, q_ref[2] - p2]
         de = [qd_ref[0] - u0, qd_ref[1] - u1, qd_ref[2] - u2]
         em = self.e_max.tolist()
@@ -512,6 +551,8 @@ class PdPlusController:
             tau[i] = min(max(x, -tmax[i]), tmax[i])
         tau_a = np.array(tau)
         self._prev_tau = tau_a
+        if self._commanded:
+            fl.append((qdd_ref[0], qdd_ref[1], qdd_ref[2]))
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))

@@ -29,10 +29,10 @@ def test_the_thesis_circle_keeps_atan2_to_the_bit(model, circle, rng):
         assert ctrl._theta_of(q) == float(circle.theta_of(p))
 
 
-def run(model, path, duration, mode='file', seed=5):
+def run(model, path, duration, mode='file', seed=5, delay_prediction='auto'):
     _, pf = load_plant_friction(default_plant_yaml(), model.joint_names)
     plant = Plant(model, pf, PlantConfig(seed=seed))
-    ctrl = PdPlusController(model, path, ControllerConfig(),
+    ctrl = PdPlusController(model, path, ControllerConfig(delay_prediction=delay_prediction),
                             controller_friction(model, mode, default_plant_yaml()
                                                 if mode == 'file' else None))
     prof = default_circle_profile(model, path, duration)
@@ -42,9 +42,11 @@ def run(model, path, duration, mode='file', seed=5):
 
 
 def test_a_circle_as_arc_is_followed_like_the_thesis_circle(model, circle):
-    """Same geometry, tracker instead of atan2: the same motion to round-off."""
+    """Same geometry, tracker instead of atan2: the same motion to round-off (with the same
+    delay compensation: 'auto' takes the thesis's rule on the CirclePath only)."""
     arc = ArcPath(circle.center, [0.0, 0.0, 1.0], circle.radius)
-    a, b = run(model, circle, 6.0), run(model, arc, 6.0)
+    a = run(model, circle, 6.0)
+    b = run(model, arc, 6.0, delay_prediction='reference')
     n = min(a.t.size, b.t.size)
     assert a.finished() and b.finished()
     sel = a.motion_mask()[:n]
