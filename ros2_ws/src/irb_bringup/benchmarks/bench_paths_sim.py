@@ -2,6 +2,7 @@
 
     python ros2_ws/src/irb_bringup/benchmarks/bench_paths_sim.py [--speeds 0.05 0.15 0.25]
         [--friction file|nominal] [--energy [--band 0.25]] [--paths ...] [--name NAME]
+        [--delay-prediction auto|commanded|reference]
 
 Per path (line, arc in a tilted plane, blended polyline, spline, rectangle with blended
 corners in a tilted plane) and TCP speed v: the planner's trapezoid along arc length with
@@ -15,7 +16,11 @@ theta-profile exactly as the plan gate does (``profile_from_joint_trajectory``),
 motion. Path error: distance of the
 simulated camera's TCP points (100 Hz, 37 um noise) to the path while the controller is in
 PATH mode. Compensation: ``file`` = the plant's own map (what a perfect identification
-gives), ``nominal`` = the model's map. Writes results/paths_sim.json and paths_sim.png.
+gives), ``nominal`` = the model's map. --delay-prediction: pdplus's delay compensation
+(``ControllerConfig.delay_prediction``; default ``auto`` as pdplus runs, ``reference`` = the
+thesis's rule everywhere, as before issue 18's fix). Also the largest distance of the plant's
+true TCP (FK of its state each period, no camera noise) from the path, and where along the
+path [mm] the camera's worst point lies. Writes results/<name>.json and <name>.png.
 """
 import argparse
 import json
@@ -58,7 +63,7 @@ def plan_request(spec, **kw):
 
 
 def run_one(model, planner, name, spec, v, objective, friction_mode, plant_friction,
-            band=0.0, accel_max=1.0):
+            band=0.0, accel_max=1.0, delay_prediction='auto'):
     path = path_from_spec(spec)
     T = path.length / (0.9 * v)
     process = {}
@@ -76,7 +81,8 @@ def run_one(model, planner, name, spec, v, objective, friction_mode, plant_frict
     ff = controller_friction(model, friction_mode,
                              default_plant_yaml() if friction_mode == 'file' else None)
     plant = Plant(model, plant_friction, PlantConfig(seed=7))
-    ctrl = PdPlusController(model, path, ControllerConfig(), ff)
+    ctrl = PdPlusController(model, path, ControllerConfig(delay_prediction=delay_prediction),
+                            ff)
     ctrl.set_path_profile(prof)
     plant.reset(tr['q'][0])
     res = simulate_closed_loop(plant, ctrl, T + 3.0)
@@ -86,11 +92,17 @@ def run_one(model, planner, name, spec, v, objective, friction_mode, plant_frict
     err = path.distance(res.cam_p[cam]) if cam.any() else np.array([np.nan])
     v_tcp = np.linalg.norm([model.jacobian(q) @ qd for q, qd in zip(res.q[sel], res.qd[sel])],
                            axis=1)
+    true_err = path.distance(np.array([model.fk(q) for q in res.q[sel]]))
+    worst = res.cam_p[cam][int(np.argmax(err))] if cam.any() else None
     return {'path': name, 'objective': objective, 'tcp_speed_m_s': v, 'duration_s': T,
             'length_m': path.length, 'completed': bool(res.finished()),
             'stop_reason': res.stop_reason, 'camera_points': int(cam.sum()),
             'path_error_mean_mm': float(np.mean(err) * 1e3),
             'path_error_max_mm': float(np.max(err) * 1e3),
+            'true_tcp_error_max_mm': float(np.max(true_err) * 1e3),
+            'camera_max_at_mm': (float(path.theta_of(worst) * path.length / (2 * np.pi) * 1e3)
+                                 if worst is not None else None),
+            'delay_prediction': delay_prediction,
             'peak_tcp_speed_m_s': float(v_tcp.max()), 'energy_J': res.energy,
             'plan_energy_J': r.evaluation.energy, 'planned': True, **process}
 
@@ -106,6 +118,9 @@ def main():
                     help='[m/s^2] |TCP acceleration| bound of --band')
     ap.add_argument('--paths', nargs='+', default=list(PATHS))
     ap.add_argument('--name', default='paths_sim')
+    ap.add_argument('--delay-prediction', default='auto',
+                    choices=('auto', 'commanded', 'reference'),
+                    help="pdplus's delay compensation (ControllerConfig.delay_prediction)")
     a = ap.parse_args()
     model = RobotModel.load()
     planner = Planner(model.copy(), PlannerSettings(grid_size=200))
@@ -116,17 +131,19 @@ def main():
         for v in a.speeds:
             for obj in ('trapezoid', 'energy') if a.energy else ('trapezoid',):
                 row = run_one(model, planner, name, PATHS[name], v, obj, a.friction,
-                              plant_friction, a.band, a.accel_max)
+                              plant_friction, a.band, a.accel_max, a.delay_prediction)
                 rows.append(row)
                 if not row['planned']:
                     print(f"{name:18s} {obj:9s} v={v:.2f} m/s: not planned: {row['reason']}",
                           flush=True)
                     continue
                 print(f"{name:18s} {obj:9s} v={v:.2f} m/s: mean {row['path_error_mean_mm']:.4f}"
-                      f" mm, max {row['path_error_max_mm']:.4f} mm, done {row['completed']} "
+                      f" mm, max {row['path_error_max_mm']:.4f} mm (true TCP "
+                      f"{row['true_tcp_error_max_mm']:.4f} mm), done {row['completed']} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
     ok = [r for r in rows if r['completed']]
     data = {'friction_compensation': a.friction, 'band': a.band,
+            'delay_prediction': a.delay_prediction,
             'accel_max_m_s2': a.accel_max if a.band else None, 'rows': rows,
             'worst_mean_mm': max(r['path_error_mean_mm'] for r in ok) if ok else None,
             'worst_max_mm': max(r['path_error_max_mm'] for r in ok) if ok else None,
