@@ -52,6 +52,9 @@ class PdPlusNode(Node):
         par('kd', list(d.kd), 'derivative gains [N m s/rad]')
         par('period_s', d.period_s, 'sample period [s]')
         par('prediction_samples', d.prediction_samples, 'delay compensation [samples]')
+        par('delay_prediction', d.delay_prediction, "q, qd over the delay: 'commanded' (with "
+            "the accelerations of the commands in flight), 'reference' (with qdd_ref at "
+            "t + delta, the thesis), 'auto' (reference on the thesis circle, else commanded)")
         par('ramp_min_duration_s', d.ramp_min_duration_s, 'ramp to the start [s] (minimum)')
         par('friction_mode', 'nominal', "friction feed-forward: 'none', 'nominal', 'file'")
         par('friction_map_file', '', "friction-map YAML for mode 'file'")
@@ -114,6 +117,7 @@ class PdPlusNode(Node):
         cfg = ControllerConfig(
             kp=tuple(P['kp']), kd=tuple(P['kd']), period_s=P['period_s'],
             prediction_samples=P['prediction_samples'],
+            delay_prediction=P['delay_prediction'],
             ramp_min_duration_s=P['ramp_min_duration_s'],
             friction_blend_a=P['friction_blend_a'],
             torque_limit_nm=None if len(tl) != 3 else tuple(tl),

@@ -299,6 +299,33 @@ def test_builtin_profile_none_waits_for_a_plan():
         rclpy.try_shutdown(context=ctx)
 
 
+@pytest.mark.parametrize('value, path_file, commanded', [
+    (None, False, False), (None, True, True), ('reference', True, False),
+    ('commanded', False, True)])
+def test_delay_prediction_parameter_reaches_the_controller(tmp_path, value, path_file,
+                                                           commanded):
+    """delay_prediction: 'auto' (default) keeps the thesis rule on the circle, the in-flight
+    accelerations on a path file's polyline; an explicit value wins."""
+    f = tmp_path / 'line.yaml'
+    f.write_text('type: polyline\nwaypoints: [[0.6, -0.1, 0.3], [0.7, 0.0, 0.3], '
+                 '[0.6, 0.1, 0.3]]\nblend_radii: [0.02]\n')
+    over = [Parameter('builtin_profile', value='none')]
+    if value is not None:
+        over.append(Parameter('delay_prediction', value=value))
+    if path_file:
+        over.append(Parameter('path_file', value=str(f)))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    try:
+        node = PdPlusNode(context=ctx, namespace=f'/t{uuid.uuid4().hex[:8]}',
+                          parameter_overrides=over)
+        assert node.ctrl.config.delay_prediction == (value or 'auto')
+        assert node.ctrl._commanded is commanded
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
     """No ramp while torque_command has no subscriber (0.6 s of joint states); once one is
     matched, the ramp starts (the settle time, SettleGate, is tested in test_pd_plus)."""
