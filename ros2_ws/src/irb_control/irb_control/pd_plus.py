@@ -559,6 +559,10 @@ class PdPlusController:
 
     def _rejected(self) -> ControlOutput:
         self.rejected_inputs += 1
+        # no command for this sample: the drive keeps acting on the last one, so it is in
+        # flight once more (as the plant's delay line repeats it)
+        if self._commanded and self._in_flight:
+            self._in_flight.append(self._in_flight[-1])
         return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason,
                              rejected_input=True)
 

@@ -197,3 +197,29 @@ def test_in_flight_history_starts_empty_after_enable_and_stop(model):
             assert len(ctrl._in_flight) == min(k + 1, 3)
         ctrl.stop('test')
         assert len(ctrl._in_flight) == 0
+
+
+def test_a_rejected_sample_keeps_the_last_command_in_flight(model, rng):
+    """A NaN measurement gets no command; the drive (and the plant's delay line) repeats the
+    last one, so the following predictions integrate it twice (oracle: integrate). Rejected
+    samples every 3rd step around the first step of qdd, where the difference shows."""
+    traj = bang_trajectory()
+    ctrl, t = start(model, RECT, traj, 'commanded')
+    sent, computed, differs = [], [], 0.0
+    for k in range(70):
+        q, qd = Q0 + rng.normal(0, 1e-3, 3), rng.normal(0, 0.05, 3)
+        if 36 <= k <= 57 and k % 3 == 0:
+            out = ctrl.step(t + k * T, np.full(3, np.nan), qd)
+            assert out.rejected_input and not out.publish
+            sent.append(sent[-1])
+            continue
+        out = ctrl.step(t + k * T, q, qd)
+        if k > 36:
+            qp, qdp = integrate(q, qd, sent[-3:])
+            np.testing.assert_allclose(out.q_error, out.q_ref - qp, atol=1e-9, rtol=0)
+            np.testing.assert_allclose(out.qd_error, out.qd_ref - qdp, atol=1e-9, rtol=0)
+            _, qd_naive = integrate(q, qd, computed[-3:])      # without the repeats
+            differs = max(differs, float(np.abs(qd_naive - qdp).max()))
+        sent.append(out.qdd_ref.copy())
+        computed.append(out.qdd_ref.copy())
+    assert differs > 1e-3          # [rad/s]: the repeats mattered here
