@@ -35,9 +35,13 @@ LO, HI = (0.5, 0.0, 0.13), (1.3, 0.0, 0.13)
 
 
 @pytest.fixture
-def ros(tmp_path):
+def ros(tmp_path, monkeypatch):
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '41')))
+    domain = int(os.environ.get('ROS_DOMAIN_ID', '41'))
+    # the `place --node` client joins the default context, whose domain is the environment's:
+    # the same one as the server's also when pytest runs without scripts/test.sh's variable
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+    rclpy.init(context=ctx, domain_id=domain)
     ns = f'/place_test_{uuid.uuid4().hex[:8]}'
     server = PlannerNode(context=ctx, namespace=ns, parameter_overrides=[
         Parameter('grid_size', value=40), Parameter('evaluation_rate_hz', value=500.0),

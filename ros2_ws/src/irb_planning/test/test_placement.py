@@ -10,7 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from irb_planning import place_cli
 from irb_planning.evaluator import LimitSet, evaluate
-from irb_planning.placement import Region, certificate, placement_request, plot_map, search
+from irb_planning.placement import (Region, bound_map, certificate, coverage,
+                                    fixed_electrical_energy, local_minima, placement_request,
+                                    plot_bound_map, plot_bounds, plot_map, search)
 from irb_planning.request import ERROR_UNREACHABLE, PlanError, PlanRequest
 
 TRUE_MIN = np.array([0.63, -0.07, 0.05])
@@ -203,3 +205,188 @@ def test_offline_cli_writes_the_refused_points_when_nothing_is_reachable(tmp_pat
     assert data['best_center'] is None and len(data['refused']) == 2
     assert all('unreachable' in r for r in data['refused'].values())
     assert not (tmp_path / 'p.png').exists()
+
+
+SECOND_MIN = np.array([0.47, 0.27, 0.32])
+
+
+class TwoBasins:
+    """E(c) = min(60 + 300 |c - c1|^2, 57 + 600 |c - c2|^2) (two basins, the second lower;
+    its grid value is not the lowest), x > 0.78 unreachable."""
+
+    def plan(self, req):
+        c = np.asarray(req.center, float)
+        if c[0] > 0.78:
+            raise PlanError(ERROR_UNREACHABLE, 'path unreachable: outside the workspace')
+        e = min(60 + 300 * float(np.sum((c - TRUE_MIN) ** 2)),
+                57 + 600 * float(np.sum((c - SECOND_MIN) ** 2)))
+        return SimpleNamespace(verification=SimpleNamespace(energy=e, electrical={}))
+
+
+def test_multistart_runs_from_each_basin_and_reports_every_start_and_its_end():
+    region = Region(np.array([0.4, -0.4, -0.2]), np.array([0.8, 0.4, 0.4]))
+    args = dict(n=(5, 5, 4), coarse_grid=30, refine=1, min_step=0.005,
+                progress=lambda s: None)
+    one = search(TwoBasins(), PlanRequest(duration=10.0), region, **args)
+    many = search(TwoBasins(), PlanRequest(duration=10.0), region, starts=3, **args)
+    # the coarse grid's best point lies in the first basin; one start ends there (60 J),
+    # the multi-start reaches the second, lower basin (57 J)
+    assert one.best_energy == pytest.approx(60.0, abs=0.05) and len(one.starts) == 1
+    assert np.isnan(one.multistart_spread_pct)
+    np.testing.assert_allclose(many.best_center, SECOND_MIN, atol=0.01)
+    assert many.best_energy == pytest.approx(57.0, abs=0.05)
+    assert len(many.starts) == 3 and many.evaluations > one.evaluations
+    # every start is a different grid point, every reported end re-planned independently
+    # gives the reported energy, the best is the lowest end, the spread its definition
+    assert len({tuple(s['start_center']) for s in many.starts}) == 3
+    again = TwoBasins()
+    ends = []
+    for s in many.starts:
+        e = again.plan(placement_request(PlanRequest(duration=10.0), s['end_center'],
+                                         *s['end_orientation'])).verification.energy
+        assert e == pytest.approx(s['end_energy'], rel=1e-12)
+        assert s['end_energy'] <= s['start_energy'] <= s['coarse_energy'] + 1e-12
+        ends.append(e)
+    assert many.best_energy == min(ends)
+    assert many.multistart_spread_pct == pytest.approx(
+        100 * (max(ends) - min(ends)) / min(ends), rel=1e-12)
+    # the coarse map has one local minimum per basin; the third start is the best other
+    # point that is no neighbour of those two
+    assert [s['local_minimum'] for s in many.starts] == [True, True, False]
+
+
+def test_local_minima_ignore_refused_neighbours():
+    # next to the refused centre, (2, 1) has no lower planned neighbour but (2, 0)
+    E = np.array([[1.0, 3.0, 4.0], [3.0, np.nan, 5.0], [4.0, 5.0, 2.0]])[:, :, None, None]
+    assert local_minima(E) == [(0, 0, 0, 0), (2, 2, 0, 0)]
+    # across orientations: the same centre in a lower orientation is a neighbour
+    E2 = np.stack([E[..., 0], E[..., 0] - 0.5], axis=-1)
+    assert local_minima(E2) == [(0, 0, 0, 1), (2, 2, 0, 1)]
+    # a plateau of equal minima (diagonal neighbours) counts once: the first in index order
+    E3 = 10.0 + np.add.outer(np.arange(3.0), np.arange(3.0))[:, :, None, None]
+    E3[0, 0, 0, 0] = E3[1, 1, 0, 0] = 1.0
+    assert local_minima(E3) == [(0, 0, 0, 0)]
+
+
+def test_coverage_claims_the_reachable_points_boxes_only():
+    axes = [np.linspace(0, 1, 3), np.linspace(0, 2, 3), np.array([0.0])]
+    X, Y = np.meshgrid(axes[0], axes[1], indexing='ij')
+    E = (10 + 3 * X + 2 * Y)[:, :, None, None]
+    full = coverage(axes, E, reference=10.0)
+    np.testing.assert_allclose(full['lipschitz'], [3.0, 2.0, 0.0])
+    assert full['margin'] == pytest.approx((3 * 0.5 + 2 * 1.0) / 2)
+    # exact on a linear field: the lowest point of the box of (0, 0) is (0, 0) itself, and
+    # the bound lies below it by the margin; the whole box is covered
+    assert full['lower_bound'] == pytest.approx(10 - 1.75) and full['covered_fraction'] == 1
+    assert full['possible_improvement_pct'] == pytest.approx(17.5)
+    # L_x h_x / 2 = 1 % of 10 J / 2 axes = 0.05 J -> h_x = 1/30 m, h_y = 1/20 m
+    np.testing.assert_allclose(full['spacing_for_target_m'][:2], [1 / 30, 1 / 20])
+    assert full['spacing_for_target_m'][2] is None
+    # refuse the centre point (1, 1): its box (a whole spacing each way, 1/4 of the box) is
+    # not covered; refuse the corner (0, 0) too (1/16): 1 - 5/16 covered
+    E2 = E.copy()
+    E2[1, 1] = np.nan
+    assert coverage(axes, E2)['covered_fraction'] == pytest.approx(0.75)
+    E2[0, 0] = np.nan
+    cov = coverage(axes, E2)
+    assert cov['covered_fraction'] == pytest.approx(1 - 5 / 16)
+    assert cov['uncovered_fraction'] == pytest.approx(5 / 16)
+    assert cov['points_covered'] == 7 and cov['points_total'] == 9
+    # brute force: on a fine grid over the covered boxes no point of the field is below
+    fine = np.linspace(0, 1, 41)[:, None], np.linspace(0, 2, 81)[None, :]
+    near_x = np.broadcast_to(np.rint(fine[0] / 0.5).astype(int), (41, 81))
+    near_y = np.broadcast_to(np.rint(fine[1] / 1.0).astype(int), (41, 81))
+    covered = np.isfinite(E2[near_x, near_y, 0, 0])
+    assert np.all((10 + 3 * fine[0] + 2 * fine[1])[covered] >= cov['lower_bound'])
+    nothing = coverage(axes, np.full(E.shape, np.nan))
+    assert np.isnan(nothing['lower_bound']) and nothing['covered_fraction'] == 0
+
+
+def test_fixed_electrical_energy_from_the_parameters_by_hand():
+    """(P_sb + sum P_idle) T recomputed from irb_description's YAML (the planner's model
+    has the arm's 3 axes): 250 W + 3 x 8 W at the file's values."""
+    import yaml
+    from irb_description.electrical import load_electrical
+    from irb_description.params import config_path
+    d = yaml.safe_load(open(config_path('electrical.yaml')))
+    by_hand = (d['controller']['standby_power_w'] + sum(d['axes']['drive_idle_power_w'][:3]))
+    el = load_electrical().axes(3)
+    assert fixed_electrical_energy(el, 10.0) == pytest.approx(10.0 * by_hand, rel=1e-15)
+    assert fixed_electrical_energy(el, 10.0) == pytest.approx(2740.0)
+
+
+@pytest.mark.slow
+def test_every_bus_mode_pays_at_least_the_fixed_energy_on_closed_rest_to_rest_plans(planner):
+    """The electrical cap's premise on real plans (trapezoid and energy-optimal, two
+    placements, 2 s and 10 s): every bus mode's played energy >= (P_sb + sum P_idle) T, and
+    the margin is at least the net joint work, which is >= 0 over the closed cycle (checked
+    from the played samples: the flows' 'work')."""
+    from irb_description.electrical import BUS_MODES
+    el = planner.electrical
+    for centre in ([0.6, 0.0, 0.13], [0.6, 0.2, -0.17]):
+        for T in (2.0, 10.0):
+            for objective in ('trapezoid', 'energy'):
+                req = placement_request(PlanRequest(duration=T, objective=objective,
+                                                    grid_size=20), centre)
+                ver = planner.plan(req).verification
+                fixed = fixed_electrical_energy(el, T)
+                for mode in BUS_MODES:
+                    fl = el.flows(ver.t, ver.tau, ver.qd, mode)
+                    assert fl['work'] >= -1e-6 * fl['total'], (centre, T, mode, fl)
+                    assert ver.electrical[f'total_{mode}'] >= fixed + fl['work'] - 1e-6 * fixed
+                    assert ver.electrical[f'total_{mode}'] > fixed
+
+
+def test_plot_bounds_writes_a_png(tmp_path):
+    region = Region(np.array([0.4, -0.4, -0.2]), np.array([0.8, 0.4, 0.4]))
+
+    class WithBound(FieldPlanner):
+        def bound(self, req, T):
+            return 0.95 * self.plan(req).verification.energy
+    res = search(WithBound(), PlanRequest(duration=10.0), region, (3, 3, 2), refine=1,
+                 min_step=0.1, progress=lambda s: None, bounds=True)
+    assert res.bound_coverage['points_covered'] == int(np.isfinite(res.energy).sum())
+    png = plot_bounds(str(tmp_path / 'b.png'), res, 80.0)
+    assert (tmp_path / 'b.png').stat().st_size > 0 and png.endswith('b.png')
+    # the bounds alone on a denser grid: refused points kept with their reason
+    axes, LB, why = bound_map(WithBound(), PlanRequest(duration=10.0), region, (5, 3, 2),
+                              progress=lambda s: None)
+    assert LB.shape == (5, 3, 2, 1) and np.all(np.isnan(LB[-1])) and len(why) == 6
+    X = axes[0][:, None, None]
+    Y, Z = axes[1][None, :, None], axes[2][None, None, :]
+    field = 0.95 * (60 + 400 * ((X - TRUE_MIN[0]) ** 2 + (Y - TRUE_MIN[1]) ** 2
+                                + (Z - TRUE_MIN[2]) ** 2))
+    np.testing.assert_allclose(LB[:-1, ..., 0], field[:-1], rtol=1e-12)
+    plot_bound_map(str(tmp_path / 'd.png'), axes, LB, 60.0, best=res.best_center)
+    assert (tmp_path / 'd.png').stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_multistart_ends_on_the_real_planner_replanned_by_a_fresh_planner(model, planner):
+    """Two starts along y at the best height of the main job's box (the coarse grid's best
+    and the best other point): every reported end, re-planned at the reported placement by
+    a new Planner (its own cache, the time-optimal profile checked in full: none of the
+    search planner's settings or warm starts), gives the reported energy; the best is the
+    lowest end and the spread is what the ends say."""
+    from irb_planning.placement import PLACEMENT_MIN_DURATION_CHECK_FACTOR
+    from irb_planning.planner import Planner, PlannerSettings
+    grid = planner.settings.grid_size
+    searcher = Planner(model.copy(), PlannerSettings(
+        grid_size=grid, min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
+    task = PlanRequest(radius=0.15, direction=1, duration=10.0)
+    region = Region(np.array([0.6, -0.4, -0.17]), np.array([0.6, 0.4, -0.17]))
+    lines = []
+    res = search(searcher, task, region, (1, 3, 1), coarse_grid=20, refine=1, min_step=0.2,
+                 progress=lines.append, starts=2)
+    assert len(res.starts) == 2, lines
+    assert any(line.startswith('multi-start: 2 of 2 starts ended') for line in lines)
+    oracle = Planner(model.copy(), PlannerSettings(grid_size=grid))
+    ends = []
+    for s in res.starts:
+        assert s['plans'] >= 1 and s['end_energy'] <= s['start_energy']
+        r = oracle.plan(placement_request(task, s['end_center'], *s['end_orientation']))
+        assert r.verification.energy == pytest.approx(s['end_energy'], rel=2e-3), s
+        ends.append(s['end_energy'])
+    assert res.best_energy == min(ends)
+    assert res.multistart_spread_pct == pytest.approx(
+        100 * (max(ends) - min(ends)) / min(ends), rel=1e-9)
