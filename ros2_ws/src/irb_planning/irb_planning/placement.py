@@ -396,6 +396,11 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
     extra['energy_coverage'] = coverage(axes, E, e_best)
     if bounds:
         extra['bound_coverage'] = coverage(axes, LB, e_best)
+    cov = extra['energy_coverage']
+    progress(f'coverage: {100 * cov["covered_fraction"]:.0f} % of the box is nearest to a '
+             f'reachable map point ({100 * cov["uncovered_fraction"]:.0f} % to a refused one: '
+             f'no claim); measured Lipschitz lower bound there {cov["lower_bound"]:.2f} J '
+             f'(margin {cov["margin"]:.1f} J)')
     progress(f'best {np.round(c_best, 3).tolist()} {describe(o_best)}: '
              f'{e_best:.2f} J; lower bound over {covered}/{cells} fully reachable cells '
              f'(grid + Lipschitz) {bound:.2f} J, possible improvement there <= {gap:.2f} %; '

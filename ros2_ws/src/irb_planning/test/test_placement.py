@@ -51,6 +51,11 @@ def test_search_finds_the_minimum_keeps_refused_points_and_bounds_the_region(tmp
     # the certificate's lower bound is below the true minimum over the reachable cells
     assert res.region_lower_bound <= 55.0
     assert res.cells_covered == 4 * 4 * 3 * 2 - 4 * 3 * 2 and res.cells_total == 4 * 4 * 3 * 2
+    # nearest-point coverage: the refused x = 0.8 face owns half a spacing of the 4 along x
+    assert res.energy_coverage['covered_fraction'] == pytest.approx(7 / 8)
+    assert res.energy_coverage['lower_bound'] <= 55.0
+    assert any(line.startswith('coverage: ') and 'refused one: no claim' in line
+               for line in lines)
     assert plot_map(str(tmp_path / 'm.png'), res) and (tmp_path / 'm.png').stat().st_size > 0
 
 
