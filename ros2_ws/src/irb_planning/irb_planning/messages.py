@@ -16,7 +16,7 @@ from irb_interfaces.srv import PlaceTask, PlanPath
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from .placement import PlacementResult, Region
+from .placement import PlacementResult, Region, coverage
 from .planner import PlanResult
 from .request import PATH_CIRCLE, PlanRequest
 
@@ -162,8 +162,9 @@ def profile_from_msg(msg: Float64MultiArray) -> dict:
 
 def place_task_from_msg(msg: PlaceTask.Request, defaults: dict) -> dict:
     """PlaceTask.Request -> the arguments of ``placement.search`` (task, region, n,
-    coarse_grid, refine, min_step, min_tilt_step). ``defaults`` holds the node's values for
-    the fields a request leaves 0 (coarse_grid, n, refine, min_step, min_tilt_step). Raises
+    coarse_grid, refine, min_step, min_tilt_step, starts, bounds). ``defaults`` holds the
+    node's values for the fields a request leaves 0 (coarse_grid, n, refine, min_step,
+    min_tilt_step, starts: 1 when absent; its upper limit is the node's check). Raises
     ValueError with one line when the task or region is not one (the planner's own
     validation of the placed circle comes after)."""
     p = msg.path
@@ -188,12 +189,16 @@ def place_task_from_msg(msg: PlaceTask.Request, defaults: dict) -> dict:
                        friction_map=msg.friction_map, grid_size=int(msg.grid_size))
     return dict(task=task, region=region, n=n,
                 coarse_grid=int(msg.coarse_grid_size) or int(defaults['coarse_grid']),
-                refine=int(msg.refine) or int(defaults['refine']), **steps)
+                refine=int(msg.refine) or int(defaults['refine']),
+                starts=int(msg.starts) or int(defaults.get('starts', 1)),
+                bounds=bool(msg.bounds), **steps)
 
 
-def fill_place_map(resp: PlaceTask.Response, res: PlacementResult) -> PlaceTask.Response:
-    """The energy map, the certificate and the search figures of ``res`` into ``resp``
-    (also for a search that found nothing: the map says why)."""
+def fill_place_map(resp: PlaceTask.Response, res: PlacementResult,
+                   fixed_electrical: float = float('nan')) -> PlaceTask.Response:
+    """The energy map, the certificate, the evidence (``fill_place_evidence``) and the
+    search figures of ``res`` into ``resp`` (also for a search that found nothing: the map
+    says why)."""
     E = np.asarray(res.energy, float)
     tilts = (np.asarray(res.tilts, float) if res.tilts is not None
              else np.zeros((E.shape[3], 2)))
@@ -214,13 +219,49 @@ def fill_place_map(resp: PlaceTask.Response, res: PlacementResult) -> PlaceTask.
     resp.cells_covered, resp.cells_total = int(res.cells_covered), int(res.cells_total)
     resp.evaluations = int(res.evaluations)
     resp.search_time = float(res.wall_time)
+    return fill_place_evidence(resp, res, fixed_electrical)
+
+
+def bound_gap_pct(res: PlacementResult) -> float:
+    """[%] 100 (best - lowest convex bound over the planned map points) / best: no timing
+    at any planned map point is more than this below the best (NaN without bounds)."""
+    best, floor = float(res.best_energy), float(res.grid_bound_floor)
+    if not (np.isfinite(best) and np.isfinite(floor) and best > 0):
+        return float('nan')
+    return 100 * (best - floor) / best
+
+
+def fill_place_evidence(resp: PlaceTask.Response, res: PlacementResult,
+                        fixed_electrical: float = float('nan')) -> PlaceTask.Response:
+    """The global evidence of ``res`` into ``resp``: per compass search its start, end and
+    energy (flat arrays, 3 per start for centres and orientations; NaN ends where a start
+    was refused on the full grid), the multi-start spread, the convex bounds (NaN when not
+    computed), the nearest-point coverage (``placement.coverage`` of the map; computed here
+    when the search ended before it) and ``fixed_electrical`` [J] (NaN: mechanical)."""
+    nan3 = [float('nan')] * 3
+    runs = list(res.starts or [])
+    resp.start_center = [float(x) for r in runs for x in r['start_center']]
+    resp.start_coarse_energy = [float(r.get('coarse_energy', float('nan'))) for r in runs]
+    resp.start_local_minimum = [bool(r.get('local_minimum', False)) for r in runs]
+    resp.end_center = [float(x) for r in runs for x in (r.get('end_center') or nan3)]
+    resp.end_orientation = [float(x) for r in runs
+                            for x in (r.get('end_orientation') or nan3)]
+    resp.end_energy = [float(r.get('end_energy', float('nan'))) for r in runs]
+    resp.multistart_spread_pct = float(res.multistart_spread_pct)
+    resp.grid_bound_floor = float(res.grid_bound_floor)
+    resp.best_lower_bound = float(res.best_lower_bound)
+    resp.bound_gap_pct = bound_gap_pct(res)
+    cov = res.energy_coverage or coverage([res.xs, res.ys, res.zs], res.energy)
+    resp.covered_share = float(cov['covered_fraction'])
+    resp.refused_share = float(cov['uncovered_fraction'])
+    resp.fixed_electrical_energy = float(fixed_electrical)
     return resp
 
 
-def fill_place_response(resp: PlaceTask.Response, res: PlacementResult, nodes: dict
-                        ) -> PlaceTask.Response:
+def fill_place_response(resp: PlaceTask.Response, res: PlacementResult, nodes: dict,
+                        fixed_electrical: float = float('nan')) -> PlaceTask.Response:
     """A successful search into ``resp``: the best placement, its plan (the PlanPath fields,
-    by ``fill_response``), the map and the certificate."""
+    by ``fill_response``), the map, the certificate and the evidence."""
     fill_response(resp, res.best_plan, nodes)
     c = np.asarray(res.best_center, float)
     resp.best_center = Point(x=c[0], y=c[1], z=c[2])
@@ -229,12 +270,13 @@ def fill_place_response(resp: PlaceTask.Response, res: PlacementResult, nodes: d
     resp.best_energy = float(res.best_energy)
     resp.best_path = path_msg(res.best_plan.request)
     resp.error_code = PlaceTask.Response.ERROR_NONE
-    return fill_place_map(resp, res)
+    return fill_place_map(resp, res, fixed_electrical)
 
 
 def placement_from_msg(resp: PlaceTask.Response) -> PlacementResult:
-    """The map, best placement and certificate of a PlaceTask response as a
-    ``PlacementResult`` (no plan): what ``placement.plot_map`` draws."""
+    """The map, best placement, certificate and evidence (starts, spread, bounds,
+    coverage shares) of a PlaceTask response as a ``PlacementResult`` (no plan, no
+    per-point bounds): what ``placement.plot_map`` draws and ``place`` prints."""
     shape = tuple(int(k) for k in resp.map_shape)
     E = np.asarray(resp.map_energy, float).reshape(shape)
     reasons = {tuple(int(i) for i in np.unravel_index(k, shape)): text
@@ -254,4 +296,27 @@ def placement_from_msg(resp: PlaceTask.Response) -> PlacementResult:
         measure=resp.energy_model or 'mechanical',
         tilts=np.stack([np.asarray(resp.map_tilt_x, float),
                         np.asarray(resp.map_tilt_y, float)], axis=-1).reshape(-1, 2),
-        best_tilt=np.array([resp.best_tilt_x, resp.best_tilt_y], float))
+        best_tilt=np.array([resp.best_tilt_x, resp.best_tilt_y], float),
+        starts=_starts_from_msg(resp),
+        multistart_spread_pct=float(resp.multistart_spread_pct),
+        grid_bound_floor=float(resp.grid_bound_floor),
+        best_lower_bound=float(resp.best_lower_bound),
+        energy_coverage=dict(covered_fraction=float(resp.covered_share),
+                             uncovered_fraction=float(resp.refused_share)))
+
+
+def _starts_from_msg(resp: PlaceTask.Response) -> list:
+    """The per-start dicts of ``PlacementResult.starts`` from the flat arrays."""
+    k = len(resp.end_energy)
+    sc, ec, eo = (np.asarray(a, float).reshape(k, 3)
+                  for a in (resp.start_center, resp.end_center, resp.end_orientation))
+    out = []
+    for i in range(k):
+        ended = bool(np.isfinite(resp.end_energy[i]))
+        out.append(dict(start_center=sc[i].tolist(),
+                        coarse_energy=float(resp.start_coarse_energy[i]),
+                        local_minimum=bool(resp.start_local_minimum[i]),
+                        end_center=ec[i].tolist() if ended else None,
+                        end_orientation=eo[i].tolist() if ended else None,
+                        end_energy=float(resp.end_energy[i])))
+    return out

@@ -4,8 +4,11 @@ the centre x rotations x tilts of the plane, refinement, certificate, energy map
 Offline (default, no ROS graph: the search runs here, progress per plan) or, with ``--node``,
 as a client of the planner node's ``place_task`` service (the search runs in the node, which
 logs the progress; this waits up to ``--timeout`` s, prints the summary and writes the same
-PNG and JSON from the answer). Exit code 0 on success, 1 if the search (or the service)
-refused or found nothing reachable, 2 on bad arguments or no answer.
+PNG and JSON from the answer). ``--starts K`` and ``--bounds`` ask for the global evidence
+(multi-start compass searches, convex lower bounds at the map points), printed in both modes
+with the nearest-point coverage and, on an electrical model, the fixed electrical energy.
+Exit code 0 on success, 1 if the search (or the service) refused or found nothing reachable,
+2 on bad arguments or no answer.
 """
 from __future__ import annotations
 
@@ -15,7 +18,8 @@ import sys
 
 import numpy as np
 
-from .placement import PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, plot_map, search
+from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, coverage,
+                        fixed_electrical_energy, plot_map, search)
 from .request import ENERGY_MODELS, PlanRequest
 
 
@@ -43,6 +47,13 @@ def parse_args(argv):
     p.add_argument('--grid', type=int, default=0, help='theta nodes of refinement, 0 = default')
     p.add_argument('--refine', type=int, default=2, help='best map points re-planned')
     p.add_argument('--min-step', type=float, default=0.025, help='compass search end [m]')
+    p.add_argument('--starts', type=int, default=0, metavar='K',
+                   help='compass searches from K distinct starts (the coarse map\'s local '
+                   'minima first); 0 = 1 offline, the node\'s place_default_starts with '
+                   '--node (which refuses more than place_max_starts, 16)')
+    p.add_argument('--bounds', action='store_true',
+                   help='also the convex lower bound of every timing at each planned map '
+                   'point and at the best placement (one bound solve per point)')
     p.add_argument('--start-angle', type=float, default=0.0,
                    help='start point of the circle in its own plane [rad]')
     p.add_argument('--friction-map', default='', help="friction-map YAML ('' = nominal; "
@@ -57,9 +68,19 @@ def parse_args(argv):
     return p.parse_args(argv)
 
 
-def result_json(res) -> dict:
-    """The JSON of a search result (offline and --node alike)."""
-    return dict(best_center=(None if res.best_center is None
+def result_json(res, fixed_electrical: float = float('nan')) -> dict:
+    """The JSON of a search result (offline and --node alike), with the evidence."""
+    from .messages import bound_gap_pct
+    cov = res.energy_coverage or {}
+    evidence = dict(
+        starts=[{k: v for k, v in r.items() if k != 'result'} for r in res.starts],
+        multistart_spread_pct=res.multistart_spread_pct,
+        grid_bound_floor_j=res.grid_bound_floor, best_lower_bound_j=res.best_lower_bound,
+        bound_gap_pct=bound_gap_pct(res),
+        covered_share=cov.get('covered_fraction', float('nan')),
+        refused_share=cov.get('uncovered_fraction', float('nan')),
+        fixed_electrical_energy_j=float(fixed_electrical))
+    return dict(evidence, best_center=(None if res.best_center is None
                              else np.asarray(res.best_center, float).tolist()),
                 best_rotation_deg=float(np.degrees(res.best_rotation)),
                 best_tilt_deg=np.degrees(res.best_tilt).tolist(),
@@ -73,13 +94,61 @@ def result_json(res) -> dict:
                 refused={str(k): v for k, v in res.reasons.items()})
 
 
-def write_outputs(a, res) -> None:
+def evidence_lines(res, fixed_electrical: float = float('nan')) -> list[str]:
+    """The global evidence of a result, one line each: every compass search's start, end
+    and energy, the multi-start spread, the convex bound floor, the nearest-point coverage
+    and (electrical models) the fixed electrical energy."""
+    from .messages import bound_gap_pct
+
+    def where(c, o=None):
+        text = f'[{c[0]:.4f}, {c[1]:.4f}, {c[2]:.4f}] m'
+        if o is not None and (o[0] or o[1] or o[2]):
+            text += (f' rotation {np.degrees(o[0]):.1f} deg tilt ({np.degrees(o[1]):.2f}, '
+                     f'{np.degrees(o[2]):.2f}) deg')
+        return text
+    lines = []
+    for i, r in enumerate(res.starts):
+        head = (f'start {i + 1}/{len(res.starts)} {where(r["start_center"])} (coarse '
+                f'{r["coarse_energy"]:.2f} J'
+                + (', local minimum of the map' if r.get('local_minimum') else '') + ')')
+        if r.get('end_center') is None:
+            lines.append(head + ': refused on the full grid')
+        else:
+            lines.append(f'{head} -> end {where(r["end_center"], r["end_orientation"])}: '
+                         f'{r["end_energy"]:.2f} J')
+    ended = sum(1 for r in res.starts if np.isfinite(r['end_energy']))
+    if len(res.starts) > 1:
+        lines.append(f'multi-start: {ended} of {len(res.starts)} starts ended within '
+                     f'{res.multistart_spread_pct:.2f} % of the best {res.best_energy:.2f} J '
+                     '(evidence, not a bound: a basin narrower than the grid is missed)')
+    else:
+        lines.append('multi-start: one start (--starts K for more)')
+    if np.isfinite(res.grid_bound_floor):
+        lines.append(f'convex bounds: every timing at every planned map point costs >= '
+                     f'{res.grid_bound_floor:.2f} J, at most {bound_gap_pct(res):.2f} % below '
+                     f'the best (coarse theta grid; no claim between the points); at the best '
+                     f'placement >= {res.best_lower_bound:.2f} J')
+    else:
+        lines.append('convex bounds: not computed (--bounds)')
+    cov = res.energy_coverage or coverage([res.xs, res.ys, res.zs], res.energy)
+    lines.append(f'coverage: {100 * cov["covered_fraction"]:.1f} % of the box is nearest to '
+                 f'a reachable map point, {100 * cov["uncovered_fraction"]:.1f} % to a '
+                 'refused one (no claim there)')
+    if np.isfinite(fixed_electrical):
+        share = (f' ({100 * fixed_electrical / res.best_energy:.1f} % of the best)'
+                 if np.isfinite(res.best_energy) else '')
+        lines.append(f'electrical: standby + drive idle energy {fixed_electrical:.2f} J at '
+                     f'this duration{share}: no placement or timing draws less')
+    return lines
+
+
+def write_outputs(a, res, fixed_electrical: float = float('nan')) -> None:
     """The PNG (--plot) and the JSON (--json) of a result."""
     if a.plot and not np.all(np.isnan(res.energy)):
         print('plot:', plot_map(a.plot, res))
     if a.json:
         with open(a.json, 'w', encoding='utf-8') as f:
-            json.dump(result_json(res), f, indent=1)
+            json.dump(result_json(res, fixed_electrical), f, indent=1)
         print('json:', a.json)
 
 
@@ -102,6 +171,7 @@ def build_request(a, region: Region):
     req.grid_points = [int(k) for k in a.n]
     req.refine, req.min_step = a.refine, a.min_step
     req.min_tilt_step = float(np.radians(a.min_tilt_step))
+    req.starts, req.bounds = a.starts, a.bounds
     return req
 
 
@@ -141,7 +211,9 @@ def ask_node(a, region: Region, args=None) -> int:
                 write_outputs(a, res)
             return 1
         print(summary(resp))
-        write_outputs(a, placement_from_msg(resp))
+        res = placement_from_msg(resp)
+        print('\n'.join(evidence_lines(res, resp.fixed_electrical_energy)))
+        write_outputs(a, res, resp.fixed_electrical_energy)
         return 0
     return call_service(PlaceTask, a.service, request, a.timeout, 'place_cli', answered, args,
                         asking=f'asking {a.service} (the node logs the progress; waiting up '
@@ -156,8 +228,9 @@ def main(args=None):
     try:
         region = Region(np.array(a.lo), np.array(a.hi), tuple(np.radians(a.rotations)),
                         tuple(np.radians(a.tilt_x)), tuple(np.radians(a.tilt_y)))
-        if a.duration <= 0 or min(a.n) < 1 or not a.min_tilt_step > 0:
-            raise ValueError('duration and --min-tilt-step must be > 0 and every --n >= 1')
+        if a.duration <= 0 or min(a.n) < 1 or not a.min_tilt_step > 0 or a.starts < 0:
+            raise ValueError('duration and --min-tilt-step must be > 0, every --n >= 1 and '
+                             '--starts >= 0')
     except ValueError as exc:
         print(f'place: {exc}', file=sys.stderr)
         return 2
@@ -172,13 +245,17 @@ def main(args=None):
     try:
         res = search(planner, task, region, tuple(a.n), a.coarse_grid, a.refine, a.min_step,
                      progress=lambda s: print(s, flush=True),
-                     min_tilt_step=np.radians(a.min_tilt_step))
+                     min_tilt_step=np.radians(a.min_tilt_step), starts=max(a.starts, 1),
+                     bounds=a.bounds)
     except KeyboardInterrupt:
         return 130
-    write_outputs(a, res)              # also when nothing is reachable: the JSON says why
+    fixed = (fixed_electrical_energy(planner.electrical, a.duration)
+             if ENERGY_MODELS[a.energy_model] else float('nan'))
+    write_outputs(a, res, fixed)       # also when nothing is reachable: the JSON says why
     if res.best_center is None:
         print('no reachable placement in the region', file=sys.stderr)
         return 1
+    print('\n'.join(evidence_lines(res, fixed)))
     return 0
 
 

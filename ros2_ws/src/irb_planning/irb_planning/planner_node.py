@@ -36,10 +36,10 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from . import messages
-from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, placement_request, plot_map,
-                        search)
+from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, fixed_electrical_energy,
+                        placement_request, plot_map, search)
 from .planner import Planner, PlannerSettings, request_error_code
-from .request import PlanError, validate
+from .request import ENERGY_MODELS, PlanError, validate
 
 #: parameter name -> (PlannerSettings field, description with unit)
 PARAMETERS = {
@@ -91,6 +91,10 @@ PLACE_PARAMETERS = {
                                 'request says 0 [rad]'),
     'place_max_points': (1000, 'most map points (x * y * z * orientations) a request may ask '
                          'for [-]'),
+    'place_default_starts': (1, 'compass searches from distinct starts when the request says '
+                             '0 (1: from the best re-planned map point only) [-]'),
+    'place_max_starts': (16, 'most starts a request may ask for (each start is a compass '
+                         'search of tens of plans) [-]'),
     'place_cache_size': (2, "built problems the search's own planner keeps (each placement "
                          'is a new problem) [-]'),
     'place_map_dir': ('', "directory the map PNG of each search is written to; '' = none "
@@ -113,6 +117,11 @@ class _StoppablePlanner:
         if self.stop.is_set():
             raise _Stopped()
         return self.planner.plan(request)
+
+    def bound(self, request, duration):
+        if self.stop.is_set():
+            raise _Stopped()
+        return self.planner.bound(request, duration)
 
 
 class PlannerNode(Node):
@@ -147,6 +156,8 @@ class PlannerNode(Node):
             for name, (default, text) in PLACE_PARAMETERS.items()}
         if len(self.place['place_grid_points']) != 3:
             raise ValueError('place_grid_points must be 3 numbers (x, y, z)')
+        if not 1 <= self.place['place_default_starts'] <= self.place['place_max_starts']:
+            raise ValueError('place_default_starts must be in [1, place_max_starts]')
         self.place_planner = Planner(self.planner.model.copy(), dataclasses.replace(
             settings, cache_size=int(self.place['place_cache_size']),
             min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
@@ -195,7 +206,8 @@ class PlannerNode(Node):
         defaults = dict(n=list(p['place_grid_points']),
                         coarse_grid=p['place_coarse_grid_size'], refine=p['place_refine'],
                         min_step=p['place_min_step_m'],
-                        min_tilt_step=p['place_min_tilt_step_rad'])
+                        min_tilt_step=p['place_min_tilt_step_rad'],
+                        starts=p['place_default_starts'])
         try:
             args = messages.place_task_from_msg(request, defaults)
         except ValueError as exc:
@@ -206,6 +218,10 @@ class PlannerNode(Node):
             raise PlanError(PlaceTask.Response.ERROR_INVALID_REQUEST,
                             f'{points} map points asked for, at most {p["place_max_points"]} '
                             '(parameter place_max_points)')
+        if args['starts'] > p['place_max_starts']:
+            raise PlanError(PlaceTask.Response.ERROR_INVALID_REQUEST,
+                            f'{args["starts"]} starts asked for, at most '
+                            f'{p["place_max_starts"]} (parameter place_max_starts)')
         # the planner's own checks of the task (radius, direction, energy model, grids) on
         # the placed circle, for both grids, and the friction map, before the first plan
         pl, s = self.place_planner, self.place_planner.settings
@@ -252,22 +268,27 @@ class PlannerNode(Node):
             self._place_state = line
             log.info(f'place_task: {line}')
 
+        task = args['task']
         log.info(f'place_task: {args["n"]} centres x {args["region"].orientations().shape[0]}'
-                 f' orientations, {args["task"].energy_model or "mechanical"} energy, '
-                 f'{args["task"].duration:g} s')
+                 f' orientations, {task.energy_model or "mechanical"} energy, '
+                 f'{task.duration:g} s, {args["starts"]} start(s)'
+                 + (', convex bounds' if args['bounds'] else ''))
         self._place_state = 'starting'
         res = search(_StoppablePlanner(self.place_planner, self._stopping),
                      progress=progress, **args)
         png = self._write_map(res)
         response.map_png = png
+        # the analytic electrical cap: what every plan of this duration draws (placement.py)
+        fixed = (fixed_electrical_energy(self.place_planner.electrical, task.duration)
+                 if ENERGY_MODELS.get(task.energy_model or 'mechanical') else float('nan'))
         if res.best_center is None:
             refused = sorted(set(res.reasons.values()))
-            messages.fill_place_map(response, res)
+            messages.fill_place_map(response, res, fixed)
             return self._fail(response, PlaceTask.Response.ERROR_UNREACHABLE,
                               f'no point of the region could be planned ({len(res.reasons)} '
                               f'refused: {"; ".join(refused[:2])})', 'placement')
         nodes = self.place_planner.node_samples(res.best_plan)
-        messages.fill_place_response(response, res, nodes)
+        messages.fill_place_response(response, res, nodes, fixed)
         response.message = (
             f'best placement centre {np.round(res.best_center, 4).tolist()} m, rotation '
             f'{np.degrees(res.best_rotation):.1f} deg, tilt '
@@ -276,7 +297,7 @@ class PlannerNode(Node):
             f'lower bound {res.region_lower_bound:.2f} J over {res.cells_covered}/'
             f'{res.cells_total} cells, possible improvement <= '
             f'{res.possible_improvement_pct:.2f} %; {res.evaluations} plans, '
-            f'{res.wall_time:.1f} s')
+            f'{res.wall_time:.1f} s' + _evidence_text(response))
         log.info(f'place_task: {response.message}')
         return response
 
@@ -304,6 +325,17 @@ class PlannerNode(Node):
     def destroy_node(self):
         self._stopping.set()               # a running search ends at its next plan
         return super().destroy_node()
+
+
+def _evidence_text(resp) -> str:
+    """The multi-start and bound part of the answer's one-line message ('' without)."""
+    text = ''
+    if len(resp.end_energy) > 1:
+        text += (f'; {len(resp.end_energy)} starts, spread {resp.multistart_spread_pct:.2f} %')
+    if np.isfinite(resp.grid_bound_floor):
+        text += (f'; convex bounds >= {resp.grid_bound_floor:.2f} J at the planned map points '
+                 f'({resp.bound_gap_pct:.2f} % below the best)')
+    return text
 
 
 def _spin(node: PlannerNode) -> None:

@@ -164,6 +164,18 @@ def test_place_finds_the_best_shows_refused_points_and_keeps_plan_path_serving(
         100 * (resp.best_energy - resp.region_lower_bound) / resp.best_energy, rel=1e-9)
     assert resp.evaluations >= 4 and resp.search_time > 0
     assert resp.map_png and os.path.getsize(resp.map_png) > 0
+    # the evidence not asked for: one compass search (from the best re-planned point), no
+    # spread, no bounds; the coverage by hand: the refused x = 1.3 m end owns a quarter of
+    # the box (boxes 0.2, 0.4, 0.2 m along x); mechanical: no electrical cap
+    assert len(resp.end_energy) == len(resp.start_coarse_energy) == 1
+    assert len(resp.start_center) == len(resp.end_center) == 3
+    assert resp.end_energy[0] == resp.best_energy
+    assert [resp.end_center[0], resp.end_center[1], resp.end_center[2]] == [c[0], c[1], c[2]]
+    for name in ('multistart_spread_pct', 'grid_bound_floor', 'best_lower_bound',
+                 'bound_gap_pct', 'fixed_electrical_energy'):
+        assert np.isnan(getattr(resp, name)), name
+    assert resp.covered_share == pytest.approx(0.75) and resp.refused_share == pytest.approx(
+        0.25)
 
     # the client's side: the answer as a PlacementResult draws and writes the same JSON
     res = placement_from_msg(resp)
@@ -174,6 +186,10 @@ def test_place_finds_the_best_shows_refused_points_and_keeps_plan_path_serving(
     text = place_cli.summary(resp)
     assert f'best placement: centre [{c[0]:.4f}, {c[1]:.4f}, {c[2]:.4f}] m' in text
     assert f'{resp.best_energy:.2f} J' in text and 'trapezoid' in text
+    lines = place_cli.evidence_lines(res, resp.fixed_electrical_energy)
+    assert lines[0].startswith('start 1/1 ') and f'{resp.best_energy:.2f} J' in lines[0]
+    assert 'convex bounds: not computed (--bounds)' in lines
+    assert lines[-1].startswith('coverage: 75.0 % of the box')
 
 
 @pytest.mark.slow
@@ -197,6 +213,11 @@ def test_place_on_the_electrical_model_judges_by_the_electrical_energy(ros, plan
                     energy_model='electrical_shared'), c))
     assert plan_energy(again, 'electrical_shared') == pytest.approx(resp.best_energy,
                                                                     rel=2e-3)
+    # the electrical cap from the model's numbers by hand, below the plan's energy
+    el = planner.electrical
+    fixed = (float(el.standby_power) + float(np.sum(el.drive_idle_power))) * DURATION
+    assert resp.fixed_electrical_energy == pytest.approx(fixed, rel=1e-12)
+    assert fixed < resp.best_energy
 
 
 def test_bad_requests_refused_with_one_line_and_nothing_reachable_shows_the_map(ros):
@@ -214,6 +235,7 @@ def test_bad_requests_refused_with_one_line_and_nothing_reachable_shows_the_map(
            (_place(min_step=-1.0), 1, 'min_step'),
            (_place(path=PathSpec(type='circle', radius=-0.1, direction=1)), 1, 'radius'),
            (_place(coarse_grid_size=5), 1, 'grid_size'),
+           (_place(starts=17), 1, 'place_max_starts'),
            (_place(friction_map='/no/such/map.yaml'), 4, '')]
     for req, code, word in bad:
         resp = _wait(executor, place.call_async(req))
@@ -227,6 +249,65 @@ def test_bad_requests_refused_with_one_line_and_nothing_reachable_shows_the_map(
     assert not far.success and far.error_code == PlaceTask.Response.ERROR_UNREACHABLE
     assert list(far.map_shape) == [1, 2, 1, 1] and np.all(np.isnan(far.map_energy))
     assert all('unreachable' in r for r in far.map_reason) and far.message
+
+
+@pytest.mark.slow
+def test_place_with_starts_and_bounds_answers_the_global_evidence(ros, tmp_path, capsys):
+    """starts = 2 and bounds on the 3 x 1 x 1 region (one point out of reach): one entry
+    per start, the ends inside the box and never below the best, the convex bounds below
+    the plans; the client prints the evidence from the answer, and refuses --starts 99
+    through the node with one line."""
+    server, client, executor, ns = ros
+    place = client.create_client(PlaceTask, 'place_task')
+    assert place.wait_for_service(timeout_sec=30.0)
+    resp = _wait(executor, place.call_async(_place(starts=2, bounds=True)))
+    assert resp.success, resp.message
+    k = len(resp.end_energy)
+    assert k == 2 and len(resp.start_coarse_energy) == len(resp.start_local_minimum) == k
+    assert len(resp.start_center) == len(resp.end_center) == len(resp.end_orientation) == 3 * k
+    E = np.asarray(resp.map_energy)
+    start = np.asarray(resp.start_center).reshape(k, 3)
+    # the starts are the two reachable map points, the best (a local minimum) first
+    assert sorted(start[:, 0].tolist()) == pytest.approx([0.5, 0.9])
+    np.testing.assert_allclose(sorted(resp.start_coarse_energy), np.sort(E[:2]), rtol=1e-12)
+    assert resp.start_local_minimum[0] and resp.start_coarse_energy[0] == np.nanmin(E)
+    ends = np.asarray(resp.end_center).reshape(k, 3)
+    assert np.all(np.isfinite(resp.end_energy))
+    lo, hi = np.array(LO), np.array(HI)
+    assert np.all(ends >= lo - 1e-12) and np.all(ends <= hi + 1e-12)
+    assert np.all(np.asarray(resp.end_orientation) == 0.0)
+    assert min(resp.end_energy) == resp.best_energy
+    assert all(e >= resp.best_energy - 1e-9 for e in resp.end_energy)
+    spread = 100 * (max(resp.end_energy) - resp.best_energy) / resp.best_energy
+    assert resp.multistart_spread_pct == pytest.approx(spread, rel=1e-9, abs=1e-12)
+    # the convex bounds: below every timing at the best placement and at the map points
+    assert 0.0 < resp.best_lower_bound <= resp.best_energy
+    assert 0.0 < resp.grid_bound_floor <= np.nanmin(E)
+    assert resp.bound_gap_pct == pytest.approx(
+        100 * (resp.best_energy - resp.grid_bound_floor) / resp.best_energy, rel=1e-9)
+    assert resp.covered_share == pytest.approx(0.75) and resp.refused_share == pytest.approx(
+        0.25)
+    assert np.isnan(resp.fixed_electrical_energy)
+    assert 'starts, spread' in resp.message and 'convex bounds' in resp.message
+    # the client's lines from the answer
+    res = placement_from_msg(resp)
+    lines = place_cli.evidence_lines(res)
+    assert lines[0].startswith('start 1/2 ') and lines[1].startswith('start 2/2 ')
+    assert f'{resp.end_energy[1]:.2f} J' in lines[1]
+    assert lines[2].startswith('multi-start: 2 of 2 starts ended within')
+    assert lines[3].startswith(f'convex bounds: every timing at every planned map point '
+                               f'costs >= {resp.grid_bound_floor:.2f} J')
+    out = place_cli.result_json(res)
+    assert len(out['starts']) == 2 and out['grid_bound_floor_j'] == resp.grid_bound_floor
+    # a user asking the node for too many starts: one line, exit 1, no search
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    code = place_cli.main(['--node', '--service', f'{ns}/place_task', '--starts', '99',
+                           '--timeout', str(TIMEOUT), '--plot', ''])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert out.count('\n') == 2 and 'placement refused (error 1): 99 starts asked for, at ' \
+        'most 16 (parameter place_max_starts)' in out
 
 
 def test_place_response_carries_every_plan_path_field():
