@@ -18,6 +18,10 @@ IPOPT's own timers of that solve (function and derivative evaluations vs the res
 i.e. its linear algebra), to say where a warm plan() call's time goes.
 ``--mumps-ordering``: IPOPT's mumps_pivot_order for the run (A/B against the planner's
 problem.MUMPS_ORDERING, see bench_linear_solvers.py).
+``--paired-band-rows K``: K warm polyline requests (durations drifting as above) planned by two
+planners in turn, one whose problems carry the quarter-point rows of b that only a TCP speed
+band needs (``Transcription(band_rows=True)``, as before 2026-11-26) and the planner as it is
+(without them when no band is asked for): paired solve-time ratio, iterations, energies.
 Writes results/paths.json (``--name`` to write another file).
 """
 import argparse
@@ -133,6 +137,45 @@ def profile_one(planner, spec, T):
     return out
 
 
+def paired_band_rows(spec, grid, k):
+    """Warm solves with the quarter-point rows (forced) and without (the planner as it is),
+    in turn, on the same requests: medians, the paired ratio and the energies' difference."""
+    from irb_planning import planner as planner_module
+    from irb_planning.transcription import Transcription
+
+    class WithRows(Transcription):
+        def __init__(self, *args, **kw):
+            kw['band_rows'] = True
+            super().__init__(*args, **kw)
+    planners = {}
+    try:
+        for name, cls in (('with_rows', WithRows), ('without', Transcription)):
+            planner_module.Transcription = cls
+            pl = Planner(settings=PlannerSettings(grid_size=grid))
+            tmin = pl.plan(request(spec, objective='time')).min_duration
+            pl.plan(request(spec, duration=1.5 * tmin))
+            planners[name] = pl
+    finally:
+        planner_module.Transcription = Transcription
+    rng = np.random.default_rng(0)
+    T = 1.5 * tmin
+    rows = {name: [] for name in planners}
+    for i in range(k):
+        T = float(np.clip(T * rng.uniform(0.95, 1.05), 1.05 * tmin, 30.0))
+        order = list(planners.items())
+        for name, pl in (order if i % 2 == 0 else order[::-1]):
+            r = pl.plan(request(spec, duration=T))
+            rows[name].append((r.solve_time, r.iterations, r.verification.energy))
+    w, wo = np.array(rows['with_rows']), np.array(rows['without'])
+    return {'requests': k, 'median_solve_with_rows_s': float(np.median(w[:, 0])),
+            'median_solve_without_s': float(np.median(wo[:, 0])),
+            'paired_ratio_median': float(np.median(wo[:, 0] / w[:, 0])),
+            'paired_ratio_min_max': [float(np.min(wo[:, 0] / w[:, 0])),
+                                     float(np.max(wo[:, 0] / w[:, 0]))],
+            'iterations_with_rows': w[:, 1].tolist(), 'iterations_without': wo[:, 1].tolist(),
+            'energy_max_relative_difference': float(np.max(np.abs(wo[:, 2] / w[:, 2] - 1)))}
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--grid', type=int, default=400)
@@ -144,6 +187,8 @@ def main():
     ap.add_argument('--mumps-ordering', type=int, default=None,
                     help="IPOPT's mumps_pivot_order for this run (default: the planner's, "
                          'problem.MUMPS_ORDERING; 7 = IPOPT\'s automatic choice)')
+    ap.add_argument('--paired-band-rows', type=int, default=0, metavar='K',
+                    help='A/B: K warm requests with and without the quarter-point rows')
     ap.add_argument('--circle', action='store_true',
                     help='also the thesis circle warm at the same grid, same load (reference)')
     a = ap.parse_args()
@@ -207,6 +252,9 @@ def main():
         out['thesis_circle_same_grid'] = {'median_solve_s': float(np.median(cs)),
                                           'max_solve_s': float(max(cs))}
         print('circle', out['thesis_circle_same_grid'], flush=True)
+    if a.paired_band_rows:
+        out['paired_band_rows'] = paired_band_rows(spec, a.grid, a.paired_band_rows)
+        print('paired', out['paired_band_rows'], flush=True)
     per_type = {}
     for name, sp in ({} if a.no_types else TYPES).items():
         pl = Planner(planner.model.copy(), PlannerSettings(grid_size=a.grid))

@@ -193,8 +193,10 @@ class Planner:
 
     def _entry(self, req: PlanRequest, path: PathBase, fm: FrictionMap) -> _Entry:
         accel_rows = req.tcp_accel_max > 0      # the |TCP acceleration| rows: own problem
+        band_rows = req.tcp_speed_max > 0 or req.tcp_speed_min > 0   # quarter-point rows
         key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__(),
-               req.energy_model) + (('tcp_accel',) if accel_rows else ())
+               req.energy_model) + (('tcp_accel',) if accel_rows else ()) \
+            + (('tcp_band',) if band_rows else ())
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
@@ -223,7 +225,8 @@ class Planner:
                            electrical=self.electrical if mode else None,
                            bus_mode=mode or 'shared',
                            electrical_smoothing=s.electrical_smoothing_w,
-                           tcp=tcp_path(path, theta), accel_rows=accel_rows)
+                           tcp=tcp_path(path, theta), accel_rows=accel_rows,
+                           band_rows=band_rows)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm

@@ -20,12 +20,22 @@ moves it by < 0.2 % (benchmarks/bench_timing.py).
             quarter points of every interval (on a quarter piece a convex quadratic dips at
             most b'' (h/4)^2 / 8 = (a_{k+1} - a_k) h / 64 below its end values; written as two
             linear rows); on a rest interval b(s) >= delta^2 s / h (leaving rest takes at most
-            twice the time at delta): a_0 >= delta^2 / (2 h_0), a_{N-1} <= -delta^2 / (2 h)
+            twice the time at delta): a_0 >= delta^2 / (2 h_0), a_{N-1} <= -delta^2 / (2 h).
+            The plain rows b >= delta^2 at the quarter points are implied and not built
+            unless a TCP speed band needs them (``band_rows``): where a_{k+1} >= a_k the dip
+            rows hold them, where a_{k+1} < a_k the quadratic is concave and its minimum is
+            at the nodes, bounded below as variables; on a rest interval b(0) = 0 and
+            b'(0) > 0 (convex: b rises; concave: minimum at the nodes), the same mirrored
+            at the end. Without them the KKT system of the 10-segment polyline at N = 400
+            has 2394 fewer rows (1197 inequalities and their slacks, of 20 600): a warm
+            solve takes 0.89x the time (paired median of 12 requests, 0.81-1.00, the same
+            iterations and energies to 7e-7; bench_paths.py --paired-band-rows 12).
           b <= speed bound at nodes and midpoints; |tau| <= tau_max at every node and midpoint
           boundary 'rest': b_0 = b_{N-1} = 0;  'periodic': b_0 = b_{N-1}, a_0 = a_{N-1}
           process constraints (``TcpPath`` given, request fields > 0), p' = dp/dtheta:
             TCP speed |p'| sqrt(b) <= v_max: b <= v_max^2 / |p'|^2, a bound on b at the
-              nodes, midpoints and quarter points (linear in b);
+              nodes, midpoints and quarter points (linear in b; the quarter-point rows exist
+              only in problems built with ``band_rows``, as a request with a band gets);
             TCP speed >= v_min away from the rest ends (every interval reaching past
               tcp_ramp_length of arc length from both ends; all of a periodic path): the same
               as a lower bound, also on the dip rows, so it holds between the samples too;
@@ -143,16 +153,19 @@ class Transcription:
                  max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True,
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
-                 accel_rows: bool = False):
+                 accel_rows: bool = False, band_rows: bool = False):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
         ``tcp``: the path in task space, for process constraints (speed band as bounds);
-        ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``)."""
+        ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``); ``band_rows``:
+        build the rows of b at the three quarter points of every interval, which only a TCP
+        speed band needs (without one they are implied: module docstring)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
         self.tcp, self.accel_rows = tcp, bool(accel_rows and tcp is not None)
+        self.band_rows = bool(band_rows)
         self.abs_smoothing = float(abs_smoothing)
         self._lock = threading.Lock()
         self._last = None
@@ -255,7 +268,8 @@ class Transcription:
         # largest dip of a convex quadratic between them (rows >= delta^2, interior intervals)
         dip = (a[1:] - a[:-1]) * D / (4 * TIME_SUBSTEPS ** 2)
         dip_rows = ca.vertcat(*[bj - dip for bj in [b[:-1]] + b_sub + [b[1:]]])
-        g_rows = [duration, collocation, ca.vertcat(*b_sub), b_mid, ca.vec(tau_n),
+        quarter = ca.vertcat(*b_sub) if self.band_rows else ca.SX(0, 1)
+        g_rows = [duration, collocation, quarter, b_mid, ca.vec(tau_n),
                   ca.vec(tau_m), rev_rows, dip_rows]
         if use_epi:
             g_rows += [y - e_pos + e_neg]            # = 0
@@ -298,6 +312,8 @@ class Transcription:
     # ------------------------------------------------------------------------------------
     def _bounds(self, req: SolveRequest):
         N, K = self.N, self.N - 1
+        if not self.band_rows and (req.tcp_speed_max > 0 or req.tcp_speed_min > 0):
+            raise ValueError('a TCP speed band needs a problem built with band_rows')
         beta_n = speed_bound(self.nodes.dq, req.velocity_limit)
         beta_m = speed_bound(self.mids.dq, req.velocity_limit)
         lo = req.min_theta_dot ** 2
@@ -334,6 +350,7 @@ class Transcription:
         if self.boundary == BOUNDARY_REST:
             lo_sub[0] = lo_sub[-1] = 0.0
         n_sub = TIME_SUBSTEPS - 1
+        n_quarter = n_sub if self.band_rows else 0
         tau_lim = np.asarray(req.torque_limit, float)
         tau_n, tau_m = np.tile(tau_lim, N), np.tile(tau_lim, K)
         tau_rev = np.tile(tau_lim[self._rev_joint] - self._breakaway[self._rev_joint], 3)
@@ -343,9 +360,9 @@ class Transcription:
         on = floor_k > 0                          # the speed floor's intervals (rest: never
         lo_sub = np.where(on, np.maximum(lo_sub, floor_k), lo_sub)   # the first or last)
         lo_dip = np.where(on, np.maximum(lo_dip, floor_k), lo_dip)
-        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_sub), floor_k, -tau_n, -tau_m,
+        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_quarter), floor_k, -tau_n, -tau_m,
                -tau_rev, np.tile(lo_dip, n_sub + 2)]
-        ubg = [[ut], np.zeros(K), np.tile(cap_m, n_sub), beta_m, tau_n, tau_m, tau_rev,
+        ubg = [[ut], np.zeros(K), np.tile(cap_m, n_quarter), beta_m, tau_n, tau_m, tau_rev,
                np.full((n_sub + 2) * K, np.inf)]
         if self._ne:
             lbg += [np.zeros(self._ne // 2)]

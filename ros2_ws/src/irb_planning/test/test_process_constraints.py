@@ -214,3 +214,57 @@ def test_an_open_line_at_gluing_speed_plans_inside_its_band(planner, model):
     moving = (s >= 0.04) & (s <= length - 0.04)
     assert v.max() <= band['tcp_speed_max'] * (1 + 1e-6)
     assert v[moving].min() >= band['tcp_speed_min'] * (1 - 1e-6)
+
+
+def _b_between_nodes(theta, theta_dot, a, per=64):
+    """b = theta_dot^2 at ``per`` points inside every interval from its defining quadratic,
+    b(theta_k + s) = b_k + 2 a_k s + (a_{k+1} - a_k) s^2 / h_k (written here, not imported),
+    (K, per)."""
+    b, h = theta_dot ** 2, np.diff(theta)
+    s = np.linspace(0.0, 1.0, per)[None, :] * h[:, None]
+    return (b[:-1, None] + 2 * a[:-1, None] * s
+            + (a[1:, None] - a[:-1, None]) * s ** 2 / h[:, None])
+
+
+@pytest.mark.parametrize('boundary, T, same', [('rest', 4.0, True), ('periodic', 4.0, True),
+                                             ('rest', 30.0, True), ('rest', 60.0, False),
+                                             ('periodic', 60.0, False)])
+def test_the_quarter_point_rows_are_implied_without_a_band(planner, boundary, T, same):
+    """Without a TCP speed band the problem has no rows of b at the quarter points (their
+    bounds are implied: transcription docstring); its optimum still keeps theta_dot >= delta
+    between the nodes, sampled densely from the profile's own quadratic, as closely as the
+    problem with those rows does, and where the optimum is well defined it is the same one.
+    At 30 and 60 s the floor is reached (the check bites); at 60 s the problem is flat and
+    both end in different local optima (measured: 77.53 vs 77.73 J rest, 77.94 vs 77.71 J
+    periodic), so only the floor is compared there."""
+    req = validate(PlanRequest(duration=T, boundary=boundary), 60)
+    path = path_from_spec(req.path_spec())
+    entry = planner._entry(req, path, planner.model.friction)
+    kw = dict(boundary=boundary, max_iter=planner.settings.max_iterations,
+              tol=planner.settings.tolerance, warm_start=False)
+    rows = Transcription(entry.nodes, entry.mids, entry.friction, band_rows=True, **kw)
+    lean = Transcription(entry.nodes, entry.mids, entry.friction, **kw)
+    K = entry.nodes.theta.size - 1
+    assert rows._rows[-1] - lean._rows[-1] == 3 * K
+    base, _ = planner._limits(req, planner.model.friction)
+    sreq = SolveRequest(T, 0.0, 1.0, base.min_theta_dot, base.velocity_limit,
+                        base.torque_limit)
+    ra, rb = rows.solve(sreq), lean.solve(sreq)
+    assert ra.stats.success and rb.stats.success
+    if same:
+        assert abs(rb.energy - ra.energy) <= 1e-6 * ra.energy
+    delta2 = base.min_theta_dot ** 2
+    low = []
+    for r in (ra, rb):
+        b = _b_between_nodes(r.profile.theta, r.profile.theta_dot,
+                             r.profile.theta_ddot_nodes)
+        inner = b[1:-1] if boundary == 'rest' else b
+        assert b.min() >= -1e-9
+        low.append(inner.min())
+    # IPOPT holds bounds to ~1e-8 absolute (4e-6 of delta^2 = 0.0025 rad^2/s^2)
+    assert low[1] >= min(low[0], delta2) - 2e-8, (low, delta2)
+    if T > 20:
+        assert low[1] <= 1.001 * delta2              # the floor is reached: the check bites
+    with pytest.raises(ValueError, match='band_rows'):
+        lean._bounds(SolveRequest(T, 0.0, 1.0, base.min_theta_dot, base.velocity_limit,
+                                  base.torque_limit, tcp_speed_max=0.5))
