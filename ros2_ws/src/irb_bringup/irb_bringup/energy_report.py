@@ -254,8 +254,46 @@ def placement_section(p: dict, plot: str | None, rel) -> list[str]:
         lines += [f'Certificate: none of the {cert["cells_total"]} grid cells has all its '
                   'corners reachable, so the search claims no bound over the region (a finer '
                   'grid, e.g. irb_planning `place`, gives one).', '']
+    lines += evidence_lines(p)
     if plot:
         lines += [f'![placement map]({rel(plot)})', '']
+    return lines
+
+
+def evidence_lines(p: dict) -> list[str]:
+    """Markdown of the search's evidence (``placement_study``'s ``evidence``): the
+    multi-start spread, what the convex bounds rule out at the planned points, and the
+    electrical cap that holds over the whole region."""
+    ev = p.get('evidence') or {}
+    if not ev:
+        return []
+    lines = []
+    ends = [s for s in ev['starts'] if np.isfinite(s['end_energy'])]
+    if len(ev['starts']) > 1:
+        lines += [f'Multi-start: compass searches from {len(ev["starts"])} starts (the coarse '
+                  f'map\'s local minima first) ended at '
+                  + ', '.join(f'{np.round(s["end_center_m"], 3).tolist()} m '
+                              f'({s["end_energy"]:.2f} J)' for s in ends)
+                  + f', all within {ev["spread_pct"]:.2f} % of the best: evidence that the '
+                  'grid\'s basins agree, not a bound (a basin narrower than the grid spacing '
+                  'would be missed).', '']
+    if np.isfinite(ev['grid_bound_floor_j']):
+        lines += [f'Convex lower bound of every timing (irb_planning `Planner.bound`) at each '
+                  f'of the {ev["bound_points"]} planned map points and at the best placement: '
+                  f'at least {ev["grid_bound_floor_j"]:.2f} J ({ev["measure"]}), so **no '
+                  f'timing at any of them saves more than '
+                  f'{ev["max_saving_any_timing_pct"]:.1f} %** against the trapezoid at the '
+                  f'thesis placement ({ev["reference_j"]:.2f} J). A claim at those points '
+                  'only: between them the bounds are as steep as the energies.', '']
+    cap = ev['electrical_cap_pct']
+    lines += [f'Electrical cap, for the whole region: every {p["duration_s"]:g} s plan pays '
+              f'the standby and drive idle energy {ev["fixed_electrical_j"]:.0f} J in every '
+              'bus mode whatever its placement and timing (irb_planning '
+              '`placement.fixed_electrical_energy`: the rest is the net work on the arm, >= 0 '
+              'over a closed rest-to-rest cycle), so **no placement or timing saves more than '
+              + ', '.join(f'{cap[m]:.1f} % ({m})' for m in BUS_MODES)
+              + '** of the electrical energy against the trapezoid at the thesis placement.',
+              '']
     return lines
 
 
@@ -297,7 +335,8 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
     from dataclasses import replace
 
     from irb_planning.placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region,
-                                        placement_request, plot_map, search)
+                                        fixed_electrical_energy, placement_request, plot_map,
+                                        search)
     from irb_planning.planner import Planner, PlannerSettings
     from irb_planning.request import PlanError, PlanRequest
     pl = cfg['placement']
@@ -342,7 +381,8 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
                     else out['electrical_objective']['error'])
                  + f' ({time.perf_counter() - t0:.0f} s)')
     res = search(planner, task, region, n, int(pl['coarse_grid']), int(pl['refine']),
-                 float(pl['min_step_m']), progress=lambda s: progress(f'   {s}'))
+                 float(pl['min_step_m']), progress=lambda s: progress(f'   {s}'),
+                 bounds=bool(pl.get('bounds', False)), starts=int(pl.get('starts', 1)))
     out.update(evaluations=int(res.evaluations) + 2 + bool(cfg.get('electrical_objective')),
                wall_time_s=time.perf_counter() - t0, unreachable=len(res.reasons),
                reasons=[f'{np.round([res.xs[i], res.ys[j], res.zs[k]], 3).tolist()} m: {r}'
@@ -362,4 +402,33 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
                            'over the region (red x: unreachable)')
     out['best'] = {'center_m': np.asarray(res.best_center, float).tolist(),
                    'search_energy_j': float(res.best_energy), **plan_figures(res.best_plan)}
+    out['evidence'] = search_evidence(res, out, fixed_electrical_energy(
+        planner.electrical, task.duration))
     return out
+
+
+def search_evidence(res, out: dict, fixed_electrical_j: float) -> dict:
+    """The summary's ``evidence`` of a search ``res`` (irb_planning PlacementResult):
+    per start its end and energy, the spread [%], the convex bounds' floor over the planned
+    points [J] (NaN without bounds) and the largest saving any timing there could reach
+    against the trapezoid at the thesis placement in the search's measure [%], the fixed
+    electrical energy [J] and the electrical cap per bus mode [%] (module docs of
+    irb_planning.placement)."""
+    measure = res.measure or 'mechanical'
+    key = 'mechanical' if measure == 'mechanical' else measure.split('_', 1)[1]
+    ref = float(out['trapezoid_thesis'][key])
+    floor = float(res.grid_bound_floor)
+    if np.isfinite(res.best_lower_bound):
+        floor = min(floor, float(res.best_lower_bound))
+    bound_points = (int(np.isfinite(res.lower_bounds).sum())
+                    if res.lower_bounds is not None else 0)
+    return {'starts': [{'start_center_m': s['start_center'],
+                        'end_center_m': s['end_center'],
+                        'end_energy': float(s['end_energy'])} for s in res.starts],
+            'spread_pct': float(res.multistart_spread_pct), 'measure': measure,
+            'reference_j': ref, 'grid_bound_floor_j': floor, 'bound_points': bound_points,
+            'max_saving_any_timing_pct': 100 * (1 - floor / ref),
+            'fixed_electrical_j': float(fixed_electrical_j),
+            'electrical_cap_pct': {m: 100 * (1 - fixed_electrical_j
+                                             / out['trapezoid_thesis'][m])
+                                   for m in BUS_MODES}}

@@ -184,6 +184,8 @@ def _bag_electrical_energy(bag, power_bag):
 
 
 def test_quick_pipeline_end_to_end(tmp_path):
+    import numpy as np
+
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     res = subprocess.run(['ros2', 'run', 'irb_bringup', 'thesis_run', '--quick',
                           '--root', str(tmp_path)], capture_output=True, text=True,
@@ -195,7 +197,8 @@ def test_quick_pipeline_end_to_end(tmp_path):
     report = (out / 'report.md').read_text()
     for heading in ('## Energy', '## Path accuracy', '## Identified friction', '## Planner',
                     '## Gluing contour', '## Electrical energy', '## Best placement',
-                    '## Per cycle and per year', '## Bags'):
+                    '## Per cycle and per year', '## Bags', 'Multi-start: compass searches',
+                    'Convex lower bound of every timing', 'Electrical cap, for the whole region'):
         assert heading in report
     for png in ('plots/power.png', 'plots/path_error.png', 'plots/torques_speeds.png',
                 'plots/plan.png', 'plots/electrical_power.png', 'plots/placement.png'):
@@ -270,6 +273,23 @@ def test_quick_pipeline_end_to_end(tmp_path):
     assert p['best']['search_energy_j'] == pytest.approx(p['best']['mechanical'], rel=1e-12)
     assert p['optimal_thesis']['mechanical'] <= p['trapezoid_thesis']['mechanical'] * 1.001
     assert p['executed']['bag'] == s['best_energy_ff']['bag']
+    # evidence (quick: 2 starts, bounds): no start ends below the best, the bounds lie below
+    # the best's checked energy, the caps are what their definitions say
+    ev = p['evidence']
+    assert len(ev['starts']) == 2
+    ends = [st['end_energy'] for st in ev['starts'] if np.isfinite(st['end_energy'])]
+    assert min(ends) == pytest.approx(p['best']['search_energy_j'], rel=1e-12)
+    assert 0 < ev['grid_bound_floor_j'] <= p['best']['mechanical']
+    assert ev['bound_points'] == p['grid_points'] - p['unreachable']
+    assert ev['max_saving_any_timing_pct'] == pytest.approx(
+        100 * (1 - ev['grid_bound_floor_j'] / p['trapezoid_thesis']['mechanical']), rel=1e-12)
+    assert ev['max_saving_any_timing_pct'] >= saving_percent(
+        p['best']['mechanical'], p['trapezoid_thesis']['mechanical']) - 1e-9
+    for mode, cap in ev['electrical_cap_pct'].items():
+        assert 0 < ev['fixed_electrical_j'] < p['trapezoid_thesis'][mode]
+        assert cap == pytest.approx(
+            100 * (1 - ev['fixed_electrical_j'] / p['trapezoid_thesis'][mode]), rel=1e-12)
+        assert p['best'][mode] >= ev['fixed_electrical_j']      # the cap holds for the best
     assert p['executed']['electrical'] == pytest.approx(cycle['best_energy_ff'])
     # per cycle and per year: per year = per cycle x cycles per hour x hours per year
     duty = s['duty_cycle']
