@@ -274,9 +274,9 @@ def evidence_lines(p: dict) -> list[str]:
                   f'map\'s local minima first) ended at '
                   + ', '.join(f'{np.round(s["end_center_m"], 3).tolist()} m '
                               f'({s["end_energy"]:.2f} J)' for s in ends)
-                  + f', all within {ev["spread_pct"]:.2f} % of the best: evidence that the '
-                  'grid\'s basins agree, not a bound (a basin narrower than the grid spacing '
-                  'would be missed).', '']
+                  + f'; none below the best, the others at most {ev["spread_pct"]:.2f} % above '
+                  'it: the best is the lowest of the basins this grid resolves (evidence, not '
+                  'a bound: a basin narrower than the grid spacing would be missed).', '']
     if np.isfinite(ev['grid_bound_floor_j']):
         lines += [f'Convex lower bound of every timing (irb_planning `Planner.bound`) at each '
                   f'of the {ev["bound_points"]} planned map points and at the best placement: '
@@ -285,6 +285,11 @@ def evidence_lines(p: dict) -> list[str]:
                   f'{ev["max_saving_any_timing_pct"]:.1f} %** against the trapezoid at the '
                   f'thesis placement ({ev["reference_j"]:.2f} J). A claim at those points '
                   'only: between them the bounds are as steep as the energies.', '']
+    elif ev.get('bounds_requested'):
+        lines += ['Convex lower bounds: none for this friction map. The relaxation knows only '
+                  'the parametric friction, and the map has polynomial branches that the plans '
+                  'use, so a bound from its parametric part would not bound them (irb_planning '
+                  'README, placement evidence, has them for the nominal map).', '']
     cap = ev['electrical_cap_pct']
     lines += [f'Electrical cap, for the whole region: every {p["duration_s"]:g} s plan pays '
               f'the standby and drive idle energy {ev["fixed_electrical_j"]:.0f} J in every '
@@ -404,6 +409,7 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
                    'search_energy_j': float(res.best_energy), **plan_figures(res.best_plan)}
     out['evidence'] = search_evidence(res, out, fixed_electrical_energy(
         planner.electrical, task.duration))
+    out['evidence']['bounds_requested'] = bool(pl.get('bounds', False))
     return out
 
 

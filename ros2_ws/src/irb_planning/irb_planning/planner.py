@@ -443,10 +443,14 @@ class Planner:
         with entry.lock:
             if entry.bound is None:
                 mode = ENERGY_MODELS[req.energy_model]
-                entry.bound = EnergyBound(entry.nodes, entry.mids, fm, req.boundary,
-                                          2 * self.settings.max_iterations,
-                                          electrical=self.electrical if mode else None,
-                                          bus_mode=mode or 'shared')
+                try:
+                    entry.bound = EnergyBound(entry.nodes, entry.mids, fm, req.boundary,
+                                              2 * self.settings.max_iterations,
+                                              electrical=self.electrical if mode else None,
+                                              bus_mode=mode or 'shared')
+                except ValueError as exc:       # a map with polynomial branches: no bound
+                    raise PlanError(ERROR_FRICTION_MAP, 'no convex bound for a friction '
+                                    f'map with polynomial branches ({exc})') from None
         res = entry.bound.solve(SolveRequest(duration, 0.0, 1.0, base.min_theta_dot,
                                              base.velocity_limit, base.torque_limit))
         if not res.stats.success:

@@ -215,3 +215,24 @@ def test_plant_map_time_optimal_at_grid_60(model):
                                                     friction_map_dirs=(str(CONTROL_DIR),)))
     res = planner.plan(PlanRequest(objective='time', friction_map='plant.yaml'))
     assert_executable(res)
+
+
+def test_no_convex_bound_for_a_polynomial_map_is_a_refusal_not_a_crash(planner, model,
+                                                                      map_dir):
+    """The convex relaxation knows only the parametric friction; a map with polynomial
+    branches (every identified map of the main job) gets a PlanError with code 4 naming why,
+    and a placement search asked for bounds keeps going without them (the main job's phase 6
+    crashed on the ValueError before)."""
+    from irb_planning.placement import Region, search
+    _polynomial_map(model).save(map_dir / 'poly.yaml')
+    req = PlanRequest(friction_map='poly.yaml', duration=6.0)
+    with pytest.raises(PlanError) as info:
+        planner.bound(req, 6.0)
+    assert info.value.code == rq.ERROR_FRICTION_MAP and 'polynomial' in info.value.message
+    lines = []
+    res = search(planner, req, Region(np.array([0.6, 0.0, 0.13]), np.array([0.6, 0.0, 0.13])),
+                 (1, 1, 1), coarse_grid=20, refine=1, min_step=0.1, progress=lines.append,
+                 bounds=True)
+    assert res.best_center is not None and np.isfinite(res.best_energy)
+    assert np.all(np.isnan(res.lower_bounds)) and np.isnan(res.best_lower_bound)
+    assert any('failed' in line and 'polynomial' in line for line in lines), lines
