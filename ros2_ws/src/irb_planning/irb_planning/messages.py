@@ -16,7 +16,7 @@ from irb_interfaces.srv import PlaceTask, PlanPath
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from .placement import PlacementResult, Region, coverage
+from .placement import PlacementResult, Region, bound_gap_pct, coverage
 from .planner import PlanResult
 from .request import PATH_CIRCLE, PlanRequest
 
@@ -220,15 +220,6 @@ def fill_place_map(resp: PlaceTask.Response, res: PlacementResult,
     resp.evaluations = int(res.evaluations)
     resp.search_time = float(res.wall_time)
     return fill_place_evidence(resp, res, fixed_electrical)
-
-
-def bound_gap_pct(res: PlacementResult) -> float:
-    """[%] 100 (best - lowest convex bound over the planned map points) / best: no timing
-    at any planned map point is more than this below the best (NaN without bounds)."""
-    best, floor = float(res.best_energy), float(res.grid_bound_floor)
-    if not (np.isfinite(best) and np.isfinite(floor) and best > 0):
-        return float('nan')
-    return 100 * (best - floor) / best
 
 
 def fill_place_evidence(resp: PlaceTask.Response, res: PlacementResult,

@@ -18,8 +18,8 @@ import sys
 
 import numpy as np
 
-from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, coverage,
-                        fixed_electrical_energy, plot_map, search)
+from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, bound_gap_pct,
+                        coverage, fixed_electrical_energy, plot_map, search)
 from .request import ENERGY_MODELS, PlanRequest
 
 
@@ -70,7 +70,6 @@ def parse_args(argv):
 
 def result_json(res, fixed_electrical: float = float('nan')) -> dict:
     """The JSON of a search result (offline and --node alike), with the evidence."""
-    from .messages import bound_gap_pct
     cov = res.energy_coverage or {}
     evidence = dict(
         starts=[{k: v for k, v in r.items() if k != 'result'} for r in res.starts],
@@ -98,8 +97,6 @@ def evidence_lines(res, fixed_electrical: float = float('nan')) -> list[str]:
     """The global evidence of a result, one line each: every compass search's start, end
     and energy, the multi-start spread, the convex bound floor, the nearest-point coverage
     and (electrical models) the fixed electrical energy."""
-    from .messages import bound_gap_pct
-
     def where(c, o=None):
         text = f'[{c[0]:.4f}, {c[1]:.4f}, {c[2]:.4f}] m'
         if o is not None and (o[0] or o[1] or o[2]):

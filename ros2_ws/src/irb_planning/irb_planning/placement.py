@@ -607,6 +607,15 @@ def plot_bound_map(path: str, axes, LB: np.ndarray, goal: float, title: str = ''
     return path
 
 
+def bound_gap_pct(res: PlacementResult) -> float:
+    """[%] 100 (best - lowest convex bound over the planned map points) / best: no timing
+    at any planned map point is more than this below the best (NaN without bounds)."""
+    best, floor = float(res.best_energy), float(res.grid_bound_floor)
+    if not (np.isfinite(best) and np.isfinite(floor) and best > 0):
+        return float('nan')
+    return 100 * (best - floor) / best
+
+
 def fixed_electrical_energy(electrical, duration: float) -> float:
     """(P_sb + sum_i P_idle_i) T [J]: the standby and drive idle energy every plan of
     ``duration`` pays in every DC-bus mode, whatever its placement and timing (module
