@@ -32,11 +32,16 @@ def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
         ProcessSpec('identifier', ros2_run_cmd('irb_identification', 'identifier', params={
             'out_map': str(fmap), 'out_report': str(report), 'joints': "['joint_3']",
             'quiet_period_s': 0.0, 'effort_lag_s': 0.0024192})),
-        ProcessSpec('experiments', ros2_run_cmd('irb_identification', 'experiments', params={
+    ]
+    # started once the identifier listens: the first move (+0.02 rad/s) comes ~2.5 s of
+    # simulated time after the start, a fraction of a second of wall time in lockstep, and
+    # an identifier that subscribed later missed it (fresh-clone CI 2026-11-26: 19231
+    # samples received instead of ~21500, "speed 0.01998 rad/s seen only with sign -")
+    experiments = ProcessSpec(
+        'experiments', ros2_run_cmd('irb_identification', 'experiments', params={
             'mode': 'ros', 'use_sim_time': True, 'root': str(tmp_path / 'bags'),
             'prefix': 'live', 'joints': "['joint_3']", 'speeds_rad_s': str(SPEEDS),
-            'hold_max_s': 2.5, 'hold_min_s': 2.5}), required=False),
-    ]
+            'hold_max_s': 2.5, 'hold_min_s': 2.5}), required=False)
     lines = []
 
     class Out:
@@ -50,6 +55,11 @@ def test_live_experiments_into_the_identifier_match_the_plant(tmp_path):
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
+        listening = group.wait_until(lambda: any(
+            ln.startswith('[identifier]') and 'subscribed to' in ln for ln in list(lines)),
+            120.0)
+        assert listening, ''.join(map(str, lines))[-3000:]
+        group.add(experiments)
         done = group.wait_until(lambda: group.procs['experiments'].poll() is not None, 400.0,
                                 period_s=0.5)
         tail = ''.join(map(str, lines))[-3000:]
