@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, bound_gap_pct,
-                        coverage, fixed_electrical_energy, plot_map, search)
+                        coverage, plot_map, search, task_fixed_electrical_energy)
 from .request import ENERGY_MODELS, PlanRequest
 
 
@@ -246,8 +246,7 @@ def main(args=None):
                      bounds=a.bounds)
     except KeyboardInterrupt:
         return 130
-    fixed = (fixed_electrical_energy(planner.electrical, a.duration)
-             if ENERGY_MODELS[a.energy_model] else float('nan'))
+    fixed = task_fixed_electrical_energy(planner, task)
     write_outputs(a, res, fixed)       # also when nothing is reachable: the JSON says why
     if res.best_center is None:
         print('no reachable placement in the region', file=sys.stderr)

@@ -90,7 +90,7 @@ from typing import Callable
 import numpy as np
 from irb_description.path import plane_axes
 
-from .request import PlanError, PlanRequest
+from .request import ENERGY_MODELS, PlanError, PlanRequest
 
 #: a search's planner skips playing and checking the time-optimal profile of a placement
 #: whose duration is at least this many times its time-optimal one (PlannerSettings.
@@ -251,10 +251,8 @@ def search(planner, task: PlanRequest, region: Region, n: tuple = (3, 3, 3),
         return plan_energy(res, model), res
 
     def lower_bound(center, o, grid) -> float:
-        req = replace(placement_request(task, center, *o), grid_size=grid,
-                      objective='energy')
         try:
-            return float(planner.bound(req, task.duration))
+            return placement_bound(planner, task, center, o, grid)
         except PlanError as exc:
             progress(f'bound at {np.round(center, 3).tolist()} failed: {exc.message[:80]}')
             return float('nan')
@@ -542,10 +540,8 @@ def bound_map(planner, task: PlanRequest, region: Region, n: tuple, coarse_grid:
     t0 = time.perf_counter()
     for k, idx in enumerate(itertools.product(*[range(a.size) for a in axes])):
         c = np.array([axes[d][idx[d]] for d in range(3)])
-        req = replace(placement_request(task, c, *o), grid_size=coarse_grid,
-                      objective='energy')
         try:
-            LB[idx + (0,)] = planner.bound(req, task.duration)
+            LB[idx + (0,)] = placement_bound(planner, task, c, o, coarse_grid)
             msg = f'bound {LB[idx + (0,)]:.2f} J'
         except PlanError as exc:
             reasons[idx + (0,)] = f'error {exc.code}: {exc.message[:80]}'
@@ -614,6 +610,23 @@ def bound_gap_pct(res: PlacementResult) -> float:
     if not (np.isfinite(best) and np.isfinite(floor) and best > 0):
         return float('nan')
     return 100 * (best - floor) / best
+
+
+def placement_bound(planner, task: PlanRequest, center, orientation, grid: int) -> float:
+    """The planner's convex lower bound [J] of every timing of ``task`` placed at ``center``
+    with ``orientation`` (rotation, tilt_x, tilt_y) on a theta grid of ``grid`` nodes;
+    raises PlanError as ``Planner.bound`` does."""
+    req = replace(placement_request(task, center, *orientation), grid_size=grid,
+                  objective='energy')
+    return float(planner.bound(req, task.duration))
+
+
+def task_fixed_electrical_energy(planner, task: PlanRequest) -> float:
+    """``fixed_electrical_energy`` of the planner's electrical model at the task's
+    duration when the task is judged on an electrical model, NaN on the mechanical one."""
+    if not ENERGY_MODELS.get(task.energy_model or 'mechanical'):
+        return float('nan')
+    return fixed_electrical_energy(planner.electrical, task.duration)
 
 
 def fixed_electrical_energy(electrical, duration: float) -> float:

@@ -36,10 +36,10 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
 from . import messages
-from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, fixed_electrical_energy,
-                        placement_request, plot_map, search)
+from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, placement_request, plot_map,
+                        search, task_fixed_electrical_energy)
 from .planner import Planner, PlannerSettings, request_error_code
-from .request import ENERGY_MODELS, PlanError, validate
+from .request import PlanError, validate
 
 #: parameter name -> (PlannerSettings field, description with unit)
 PARAMETERS = {
@@ -279,8 +279,7 @@ class PlannerNode(Node):
         png = self._write_map(res)
         response.map_png = png
         # the analytic electrical cap: what every plan of this duration draws (placement.py)
-        fixed = (fixed_electrical_energy(self.place_planner.electrical, task.duration)
-                 if ENERGY_MODELS.get(task.energy_model or 'mechanical') else float('nan'))
+        fixed = task_fixed_electrical_energy(self.place_planner, task)
         if res.best_center is None:
             refused = sorted(set(res.reasons.values()))
             messages.fill_place_map(response, res, fixed)
