@@ -15,12 +15,18 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from .node_help import exit_if_help
 
-def run_node(make_node, spin, args=None) -> None:
+
+def run_node(make_node, spin, args=None, spec=None) -> None:
     """The Jazzy main idiom, robust to Ctrl-C at any moment, also while the node is built.
+
+    ``spec`` (a ``node_help.NodeSpec`` or a usage text): ``--help`` prints it and exits 0
+    before anything starts.
 
     ``make_node()`` creates the node, ``spin(node)`` runs it (and owns its executor); spin
     loops run while ``running()``. The first SIGINT or SIGTERM only requests the stop (see
@@ -28,6 +34,8 @@ def run_node(make_node, spin, args=None) -> None:
     valid (statistics written, files closed, last log lines published) and the exit code is
     0; later signals are ignored, so a second Ctrl-C cannot cut the clean-up.
     """
+    if spec is not None:
+        exit_if_help(args, spec)
     init(args)
     node = None
     try:
@@ -106,6 +114,28 @@ def declare(node: Node, name: str, default, description: str):
     """Declare a parameter with a description (units in brackets) and return its value."""
     return node.declare_parameter(name, default, ParameterDescriptor(
         description=description)).value
+
+
+_ARRAY_TYPES = {'bool[]': Parameter.Type.BOOL_ARRAY, 'int[]': Parameter.Type.INTEGER_ARRAY,
+                'double[]': Parameter.Type.DOUBLE_ARRAY,
+                'string[]': Parameter.Type.STRING_ARRAY}
+
+
+def declare_params(node: Node, params, only=None) -> dict:
+    """Declare every ``node_help.Param`` of ``params`` (a ``NodeSpec``'s ``params``) with its
+    description and unit; {name: value} (the value given on the command line or in a params
+    file, else the default). ``only``: names to declare (None: all)."""
+    out = {}
+    for p in params:
+        if only is not None and p.name not in only:
+            continue
+        desc = ParameterDescriptor(description=p.described())
+        if isinstance(p.default, list) and not p.default:
+            value = node.declare_parameter(p.name, _ARRAY_TYPES[p.type], desc).value
+            out[p.name] = list(value) if value is not None else []
+        else:
+            out[p.name] = node.declare_parameter(p.name, p.default, desc).value
+    return out
 
 
 def state_qos() -> QoSProfile:
