@@ -135,10 +135,34 @@ def fill_message(msg, values: dict, where: str = ''):
             fill_message(current, value, f'{where}{name}.')
         else:
             try:
-                setattr(msg, name, value)
+                setattr(msg, name, _coerce(current, value))
             except (AssertionError, TypeError, ValueError) as exc:
                 raise ValueError(f"Failed to populate field '{where}{name}': {exc}") from None
     return msg
+
+
+def _coerce(current, value):
+    """``value`` checked against the type of the field's current value (rclpy does not
+    check every assignment): bool for bool, int for int, a number for float, text for
+    str, a list for sequences."""
+    def bad(kind):
+        return TypeError(f'{value!r} is not {kind}')
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise bad('a bool (true/false)')
+    elif isinstance(current, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad('an integer')
+    elif isinstance(current, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad('a number')
+        value = float(value)
+    elif isinstance(current, str):
+        if not isinstance(value, str):
+            raise bad('a string')
+    elif not isinstance(value, list):
+        raise bad('a list')
+    return value
 
 
 def format_request(obj) -> str:
