@@ -70,12 +70,12 @@ def mode_name(mode: int) -> str:
     return MODE_NAMES.get(int(mode), f'unknown ({mode})')
 
 
-def _fmt_rate(r: TopicRate) -> str:
+def _fmt_rate(r: TopicRate, width: int) -> str:
     if r.count == 0:
-        return f'  {r.topic:<22} no messages'
+        return f'  {r.topic:<{width}}  no messages'
     if math.isnan(r.rate_hz):
-        return f'  {r.topic:<22} {r.count} message'
-    return (f'  {r.topic:<22} {r.rate_hz:7.1f} Hz  ({r.count} msgs, largest gap '
+        return f'  {r.topic:<{width}}  {r.count} message'
+    return (f'  {r.topic:<{width}}  {r.rate_hz:7.1f} Hz  ({r.count} msgs, largest gap '
             f'{r.max_gap_s * 1e3:.1f} ms)')
 
 
@@ -120,7 +120,8 @@ def format_status(s: Snapshot) -> str:
             lines.append('  -> `ros2 run irb_bringup ctl reset` clears it'
                          + (f" ({', '.join(s.drive_resets)})" if s.drive_resets else ''))
     lines.append(f'rates over {s.window_s:g} s (wall clock):')
-    lines += [_fmt_rate(r) for r in s.rates]
+    width = max((len(r.topic) for r in s.rates), default=0)
+    lines += [_fmt_rate(r, width) for r in s.rates]
     return '\n'.join(lines)
 
 
