@@ -26,7 +26,8 @@ SETTLE_S = 1.0
 
 def parse_args(argv):
     p = argparse.ArgumentParser(
-        prog='ros2 run irb_bringup ctl', description=__doc__.splitlines()[0].split(': ', 1)[1].capitalize(),
+        prog='ros2 run irb_bringup ctl',
+        description=__doc__.splitlines()[0].split(': ', 1)[1].capitalize(),
         epilog='Exit codes: 0 done, 1 refused by the node (its message printed), 2 node or '
                'service not there or no answer within --timeout.',
         formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -155,14 +156,24 @@ def status(a, ros_args) -> int:
                 if topic == 'controller_state':
                     last['controller_state'] = data
             return cb
-        for topic in core.MAIN_TOPICS:
-            s.node.create_subscription(types[topic], core.join_name(ns, topic), on_raw(topic),
-                                       qos_profile_sensor_data, raw=True)
-        s.node.create_subscription(PlanStatus, core.join_name(pdplus, 'plan_status'),
-                                   lambda m: last.__setitem__('plan', m), latched_qos())
-        s.node.create_subscription(AxisStatus, core.join_name(ns, 'axis_status'),
-                                   lambda m: last.__setitem__('axis', m), latched_qos())
-        seen, services, drives = _discover(s, a.pdplus, a.timeout, _ready('status'))
+        subs = [s.node.create_subscription(types[t], core.join_name(ns, t), on_raw(t),
+                                           qos_profile_sensor_data, raw=True)
+                for t in core.MAIN_TOPICS]
+        subs.append(s.node.create_subscription(
+            PlanStatus, core.join_name(pdplus, 'plan_status'),
+            lambda m: last.__setitem__('plan', m), latched_qos()))
+        subs.append(s.node.create_subscription(
+            AxisStatus, core.join_name(ns, 'axis_status'),
+            lambda m: last.__setitem__('axis', m), latched_qos()))
+
+        def matched():
+            """Every topic's publishers on the graph are matched by our subscription (the
+            rates start only then: matching takes seconds on a loaded host)."""
+            return all(sub.get_publisher_count() >= s.node.count_publishers(sub.topic_name)
+                       for sub in subs)
+        seen, services, drives = _discover(
+            s, a.pdplus, a.timeout,
+            lambda found, settled: _ready('status')(found, settled) and matched())
         for times in arrivals.values():
             times.clear()
         s.spin_for(a.window)

@@ -323,7 +323,8 @@ def _service(args):
                            help='Consider hidden services as well')
     _spin_time(p['list'], 2.0)
     c = p['call']
-    c.add_argument('service_name', help="Name of the ROS service to call to (e.g. '/add_two_ints')")
+    c.add_argument('service_name',
+                   help="Name of the ROS service to call to (e.g. '/pdplus/enable')")
     c.add_argument('service_type',
                    help="Type of the ROS service (e.g. 'std_srvs/srv/Trigger')")
     c.add_argument('values', nargs='?', default='{}',
