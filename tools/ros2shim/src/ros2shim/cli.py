@@ -213,6 +213,10 @@ def _pkg(args):
     return 0
 
 # --- topic, service, bag ----------------------------------------------------------------------
+#: list verbs wait this long for discovery [s]: longer than Fast DDS's 3 s participant
+#: announcement period, so a node whose first announcements were missed (a loaded host: a
+#: 2 s wait listed only the command's own topics) is announced again within the wait
+LIST_SPIN_S = 3.5
 SPIN_TIME_HELP = ('wait for discovery [s] (ros2cli: --spin-time); list waits all of it, the '
                   'others stop once the name is there and the graph has not changed for 1 s')
 
@@ -267,7 +271,7 @@ def _topic(args):
                            help='Only display the number of topics discovered')
     p['list'].add_argument('--include-hidden-topics', action='store_true',
                            help='Consider hidden topics as well')
-    _spin_time(p['list'], 2.0)
+    _spin_time(p['list'], LIST_SPIN_S)
     e = p['echo']
     e.add_argument('topic_name', help="Name of the ROS topic to listen to (e.g. '/chatter')")
     e.add_argument('message_type', nargs='?',
@@ -321,7 +325,7 @@ def _service(args):
                            help='Only display the number of services discovered')
     p['list'].add_argument('--include-hidden-services', action='store_true',
                            help='Consider hidden services as well')
-    _spin_time(p['list'], 2.0)
+    _spin_time(p['list'], LIST_SPIN_S)
     c = p['call']
     c.add_argument('service_name',
                    help="Name of the ROS service to call to (e.g. '/pdplus/enable')")
@@ -370,7 +374,7 @@ def _bag(args):
                    'a timestamped folder in the current directory')
     r.add_argument('-s', '--storage', default='mcap',
                    help="Storage identifier: only 'mcap' (default)")
-    _spin_time(r, 2.0)
+    _spin_time(r, LIST_SPIN_S)
     options = parser.parse_args(args)
     from . import bag
     if options.subverb == 'info':

@@ -152,7 +152,7 @@ def _echo_qos(session, topic: str):
 def _wait_names(s, query, timeout: float):
     """Names and types found within ``timeout`` [s]: a list has no end to wait for, and on
     a loaded host a node missed by the first discovery burst is announced again only ~3 s
-    later (Fast DDS), so the whole time is waited."""
+    later (Fast DDS), so the whole time (3.5 s by default) is waited."""
     return s.wait_graph(query, timeout=timeout)
 
 
