@@ -190,3 +190,30 @@ def test_absent_node_is_exit_2_in_one_line(capsys):
     assert main(['enable', '--pdplus', f'{NS}/absent', '--timeout', '1']) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and 'not found within 1 s' in err
+
+
+# --- against the real simulator and pdplus -----------------------------------------------------
+def test_status_of_the_real_simulator_and_pdplus(tmp_path, capsys):
+    """The message shapes and names ctl reads are those the real nodes publish: an idle
+    pdplus (auto_enable off) beside a realtime simulator, in a namespace of their own."""
+    import subprocess
+    from irb_control.process_group import stop_sessions
+    ns = f'/ctlreal{os.getpid()}'
+    procs = [subprocess.Popen(['ros2', 'run', 'irb_control', exe, '--ros-args',
+                               '-r', f'__ns:={ns}', *extra],
+                              cwd=tmp_path, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+             for exe, extra in (('simulator', ['-p', 'mode:=realtime']),
+                                ('pdplus', ['-p', 'auto_enable:=false']))]
+    try:
+        assert main(['status', '--pdplus', f'{ns}/pdplus', '--timeout', '60',
+                     '--window', '0.5']) == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f'pdplus {ns}/pdplus: mode idle  (missed deadlines ')
+        assert re.search(r'services: enable, (.+, )?stop', out), out   # others may come
+        assert 'plan: no verdict on plan_status' in out
+        assert 'drive (simulator): motors off, brakes engaged, no error' in out
+        assert re.search(rf'{ns}/joint_states +[0-9.]+ Hz', out), out
+        assert re.search(rf'{ns}/torque_command +(no messages|[0-9.]+ Hz)', out), out
+    finally:
+        stop_sessions(procs)
