@@ -101,7 +101,8 @@ def format_status(s: Snapshot) -> str:
         lines.append(f"  services: {', '.join(sorted(s.services))}")
     p = s.plan
     if p is None:
-        lines.append('plan: no verdict on plan_status (no plan received since pdplus started)')
+        lines.append('plan: no verdict on plan_status' + (
+            ' (no plan received since pdplus started)' if s.pdplus_seen else ''))
     else:
         verdict = (f"accepted ({p['points']} points, {p['duration']:.3f} s)" if p['accepted']
                    else f"refused: {p['reason'] or '(no reason given)'}")
