@@ -179,12 +179,15 @@ def topic_info(args) -> int:
                     if i.node_name != s.node.get_name()]
             return types, pubs, subs
 
-        def key(result):
-            types, pubs, subs = result
+        def key():
+            """What must stop changing: the endpoints (as printed) and the nodes; () while
+            the topic is not on the graph."""
+            types, pubs, subs = query()
+            if not types:
+                return ()
             return (tuple(types), tuple(str(p) for p in pubs), tuple(str(p) for p in subs),
                     tuple(sorted(s.node.get_node_names_and_namespaces())))
-        result = s.wait_stable(lambda: key(query()) if query()[0] else (), SETTLE_S,
-                               args.spin_time)
+        result = s.wait_stable(key, SETTLE_S, args.spin_time)
         if not result:
             raise CliError(f"Unknown topic '{topic}'")
         types, pubs, subs = query()
