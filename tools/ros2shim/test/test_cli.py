@@ -263,7 +263,8 @@ def test_no_ament_prefix_path(monkeypatch, capfd):
     assert capfd.readouterr() == ('', "Package 'demo' not found\n")
 
 
-@pytest.mark.parametrize('argv', [['topic', 'list'], ['launch', 'a', 'b'], ['bag'],
+@pytest.mark.parametrize('argv', [['topic', 'pub', 'x'], ['node', 'list'], ['launch', 'a', 'b'],
+                                  ['bag', 'convert'], ['service', 'type', 'x'],
                                   ['pkg', 'create', 'x'], ['pkg']])
 def test_unsupported_verbs(prefix, capfd, argv):
     assert run_main(argv) == 1
@@ -271,7 +272,8 @@ def test_unsupported_verbs(prefix, capfd, argv):
     assert captured.out == ''
     lines = captured.err.splitlines()
     assert len(lines) == 1
-    assert lines[0].startswith('ros2 ' + ' '.join(argv[:2] if argv[0] == 'pkg' else argv[:1]))
+    words = argv[:2] if argv[0] in ('pkg', 'topic', 'service', 'bag') else argv[:1]
+    assert lines[0].startswith('ros2 ' + ' '.join(words))
     assert 'not available' in lines[0] and 'ros-jazzy-ros2cli' in lines[0]
     assert 'run, pkg executables|list|prefix' in lines[0]
 

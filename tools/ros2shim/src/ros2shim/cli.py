@@ -1,9 +1,11 @@
-"""A minimal ``ros2`` command: ``run`` and ``pkg``, with ros2run/ros2pkg semantics.
+"""A minimal ``ros2`` command: ``run``, ``pkg``, and the everyday subset of ``topic``,
+``service`` and ``bag``, with ros2cli's syntax, output shapes and exit codes.
 
-PyPI carries the ROS 2 Jazzy runtime but not ros2cli, so this module reimplements the two
-verbs the project needs.  Package lookup follows ament_index_python (the first entry of
+PyPI carries the ROS 2 Jazzy runtime but not ros2cli, so this module reimplements the verbs
+the project needs.  Package lookup follows ament_index_python (the first entry of
 AMENT_PREFIX_PATH that registers a package wins); executable discovery follows ros2pkg's
-``get_executable_paths``; error messages and exit codes follow ros2cli.
+``get_executable_paths``; error messages and exit codes follow ros2cli. The graph verbs
+(``graph.py``) import rclpy lazily; ``bag play|record`` run the project's replay/recorder.
 """
 
 import argparse
@@ -14,7 +16,8 @@ import signal
 import subprocess
 import sys
 
-SUPPORTED = 'run, pkg executables|list|prefix'
+SUPPORTED = ('run, pkg executables|list|prefix, topic list|echo|hz|info, service list|call, '
+             'bag info|play|record')
 RUN_USAGE = 'usage: ros2 run [-h] [--prefix PREFIX] package_name executable_name ...'
 USAGE = """usage: ros2 <verb> ...
 
@@ -23,6 +26,10 @@ Minimal ros2 shim (ros2cli is not on PyPI). Supported commands:
   ros2 pkg executables [--full-path] [package]
   ros2 pkg list
   ros2 pkg prefix [--share] <package>
+  ros2 topic list [-t] | echo <topic> [type] [--once] | hz <topic> | info <topic> [-v]
+  ros2 service list [-t] | call <service> <type> [values]
+  ros2 bag info <bag> | play <bag> [-r RATE] [--clock [HZ]] | record [-a] [-o NAME] [topics]
+'ros2 <verb> --help' gives each verb's options.
 Anything else needs a full ROS 2 Jazzy install (apt install ros-jazzy-ros2cli)."""
 # Valid package names as checked by ament_index_python.get_package_prefix (REP 127).
 _PACKAGE_NAME = re.compile(r'[a-zA-Z0-9][a-zA-Z0-9_-]+', re.ASCII)
@@ -205,6 +212,195 @@ def _pkg(args):
             print(path if options.full_path else f'{name} {os.path.basename(path)}')
     return 0
 
+# --- topic, service, bag ----------------------------------------------------------------------
+#: list verbs wait this long for discovery [s]: longer than Fast DDS's 3 s participant
+#: announcement period, so a node whose first announcements were missed (a loaded host: a
+#: 2 s wait listed only the command's own topics) is announced again within the wait
+LIST_SPIN_S = 3.5
+SPIN_TIME_HELP = ('wait for discovery [s] (ros2cli: --spin-time); list waits all of it, the '
+                  'others stop once the name is there and the graph has not changed for 1 s')
+
+
+def _verb_parser(verb, subverbs, description):
+    """``ros2 <verb>`` with one sub-parser per supported sub-verb."""
+    parser = argparse.ArgumentParser(prog=f'ros2 {verb}', description=description)
+    sub = parser.add_subparsers(dest='subverb', metavar='Commands', required=True)
+    return parser, {name: sub.add_parser(name, prog=f'ros2 {verb} {name}', help=text,
+                                         description=text)
+                    for name, text in subverbs.items()}
+
+
+def _spin_time(parser, default):
+    parser.add_argument('--spin-time', type=float, default=default, help=SPIN_TIME_HELP +
+                        f' (default: {default:g})')
+
+
+def _non_negative_int(text):
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError('value must be non-negative integer')
+    return value
+
+
+def _positive_float(text):
+    value = float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError('value must be positive')
+    return value
+
+
+TOPIC_VERBS = {'list': 'Output a list of available topics',
+               'echo': 'Output messages from a topic',
+               'hz': 'Print the average publishing rate to screen',
+               'info': 'Print information about a topic'}
+SERVICE_VERBS = {'list': 'Output a list of available services',
+                 'call': 'Call a service'}
+BAG_VERBS = {'info': 'Print information about a bag to the screen',
+             'play': "Play back ROS data from a bag (the project's replay)",
+             'record': "Record ROS data to a bag (the project's recorder)"}
+
+
+def _topic(args):
+    """Implement ``ros2 topic list|echo|hz|info``."""
+    if args and not args[0].startswith('-') and args[0] not in TOPIC_VERBS:
+        return _unavailable(f'ros2 topic {args[0]}')
+    parser, p = _verb_parser('topic', TOPIC_VERBS, 'Various topic related sub-commands')
+    p['list'].add_argument('-t', '--show-types', action='store_true',
+                           help='Additionally show the topic type')
+    p['list'].add_argument('-c', '--count-topics', action='store_true',
+                           help='Only display the number of topics discovered')
+    p['list'].add_argument('--include-hidden-topics', action='store_true',
+                           help='Consider hidden topics as well')
+    _spin_time(p['list'], LIST_SPIN_S)
+    e = p['echo']
+    e.add_argument('topic_name', help="Name of the ROS topic to listen to (e.g. '/chatter')")
+    e.add_argument('message_type', nargs='?',
+                   help="Type of the ROS message (e.g. 'std_msgs/msg/String')")
+    e.add_argument('--once', action='store_true',
+                   help='Print the first message received and then exit.')
+    e.add_argument('--timeout', type=_positive_float, default=None,
+                   help='With --once: give up after this many seconds without a message '
+                        '(exit 1)')
+    e.add_argument('--field', help='Echo a selected field of a message, e.g. header.stamp')
+    e.add_argument('--full-length', '-f', action='store_true',
+                   help='Output all elements for arrays, bytes, and string')
+    e.add_argument('--truncate-length', '-l', type=_non_negative_int, default=128,
+                   help='The length to truncate arrays, bytes, and string to (default: 128)')
+    e.add_argument('--no-arr', action='store_true', help="Don't print array fields of messages")
+    e.add_argument('--no-str', action='store_true',
+                   help="Don't print string fields of messages")
+    e.add_argument('--flow-style', action='store_true',
+                   help='Print collections in the flow style')
+    _spin_time(e, 5.0)
+    h = p['hz']
+    h.add_argument('topic_name', help="Name of the ROS topic to listen to (e.g. '/chatter')")
+    h.add_argument('message_type', nargs='?', help=argparse.SUPPRESS)
+    h.add_argument('--window', '-w', type=_non_negative_int, default=10000,
+                   help='window size, in # of messages, for calculating rate (default: 10000)')
+    h.add_argument('--wall-time', action='store_true',
+                   help='calculates rate using wall time (always the case here)')
+    _spin_time(h, 5.0)
+    i = p['info']
+    i.add_argument('topic_name', help="Name of the ROS topic to get info (e.g. '/chatter')")
+    i.add_argument('--verbose', '-v', action='store_true',
+                   help='Prints detailed information like the node name, node namespace, '
+                        'topic type, GUID and QoS Profile of the publishers and subscribers '
+                        'to this topic')
+    _spin_time(i, 5.0)
+    options = parser.parse_args(args)
+    if options.subverb == 'hz' and options.window < 2:
+        parser.error('--window must be at least 2')
+    from . import graph
+    return getattr(graph, f'topic_{options.subverb}')(options)
+
+
+def _service(args):
+    """Implement ``ros2 service list|call``."""
+    if args and not args[0].startswith('-') and args[0] not in SERVICE_VERBS:
+        return _unavailable(f'ros2 service {args[0]}')
+    parser, p = _verb_parser('service', SERVICE_VERBS, 'Various service related sub-commands')
+    p['list'].add_argument('-t', '--show-types', action='store_true',
+                           help='Additionally show the service type')
+    p['list'].add_argument('-c', '--count-services', action='store_true',
+                           help='Only display the number of services discovered')
+    p['list'].add_argument('--include-hidden-services', action='store_true',
+                           help='Consider hidden services as well')
+    _spin_time(p['list'], LIST_SPIN_S)
+    c = p['call']
+    c.add_argument('service_name',
+                   help="Name of the ROS service to call to (e.g. '/pdplus/enable')")
+    c.add_argument('service_type',
+                   help="Type of the ROS service (e.g. 'std_srvs/srv/Trigger')")
+    c.add_argument('values', nargs='?', default='{}',
+                   help="Values to fill the service request with in YAML format (e.g. "
+                        "'{data: true}'), otherwise the service request will be published "
+                        'with default values')
+    c.add_argument('--timeout', type=_positive_float, default=None,
+                   help='give up (exit 1) when the service is not there or has not answered '
+                        'after this many seconds (default: wait, as ros2cli)')
+    options = parser.parse_args(args)
+    from . import graph
+    return getattr(graph, f'service_{options.subverb}')(options)
+
+
+def _bag(args):
+    """Implement ``ros2 bag info|play|record``."""
+    if args and not args[0].startswith('-') and args[0] not in BAG_VERBS:
+        return _unavailable(f'ros2 bag {args[0]}')
+    parser, p = _verb_parser('bag', BAG_VERBS, 'Various rosbag related sub-commands')
+    p['info'].add_argument('bag_path', help='Bag to open')
+    p['info'].add_argument('-s', '--storage', default='', help='Storage implementation of bag. '
+                           'Only mcap is read here.')
+    pl = p['play']
+    pl.add_argument('bag_path', help='Bag to open')
+    pl.add_argument('-r', '--rate', type=float, default=1.0,
+                    help='rate at which to play back messages; 0 = as fast as possible '
+                         '(default: 1.0)')
+    pl.add_argument('--topics', nargs='+', default=[], help='topics to replay (default: all)')
+    pl.add_argument('--clock', type=_positive_float, nargs='?', const=40.0, default=0.0,
+                    help='Publish to /clock at a specific frequency in Hz (default: 40 when '
+                         'given without a value)')
+    pl.add_argument('-d', '--delay', type=float, default=None,
+                    help='Sleep duration before play (each loop), in seconds')
+    pl.add_argument('-l', '--loop', action='store_true', help='not supported here (exit 1)')
+    r = p['record']
+    r.add_argument('topics', nargs='*', help='List of topics to record.')
+    r.add_argument('--topics', dest='topics_opt', nargs='+', default=[], metavar='TOPIC',
+                   help='List of topics to record.')
+    r.add_argument('-a', '--all', action='store_true',
+                   help='Record all topics on the graph now (a topic that appears later is '
+                        'not recorded)')
+    r.add_argument('-o', '--output', help='Destination of the bagfile to create, defaults to '
+                   'a timestamped folder in the current directory')
+    r.add_argument('-s', '--storage', default='mcap',
+                   help="Storage identifier: only 'mcap' (default)")
+    _spin_time(r, LIST_SPIN_S)
+    options = parser.parse_args(args)
+    from . import bag
+    if options.subverb == 'info':
+        if options.storage not in ('', 'mcap'):
+            return _error(f"ros2 bag info: storage '{options.storage}' is not supported here "
+                          '(mcap only)')
+        try:
+            return bag.info(options)
+        except bag.BagInfoError as exc:
+            return _error(str(exc))
+    if options.subverb == 'play':
+        if options.loop:
+            return _error('ros2 bag play: --loop is not supported by the project\'s replay')
+        return _run(bag.play_command(options, bag.cwd()))
+    if options.storage != 'mcap':
+        return _error(f"ros2 bag record: storage '{options.storage}' is not supported here "
+                      '(the recorder writes mcap)')
+    if options.all and (options.topics or options.topics_opt):
+        return _error('ros2 bag record: give either -a or topics, not both', 2)
+    if not options.all and not (options.topics or options.topics_opt):
+        return _error('ros2 bag record: no topics given (name them, or -a for all)', 2)
+    found = bag.discover_topics(options.spin_time) if options.all else None
+    if options.all and not found:
+        return _error('ros2 bag record -a: no topics on the graph')
+    return _run(bag.record_command(options, bag.cwd(), found))
+
 
 def main(argv=None):
     """Run the ``ros2`` command line with ``argv`` (default: sys.argv[1:]); return exit code."""
@@ -217,8 +413,16 @@ def main(argv=None):
             return _run(args[1:])
         if args and args[0] == 'pkg':
             return _pkg(args[1:])
+        verbs = {'topic': _topic, 'service': _service, 'bag': _bag}
+        if args and args[0] in verbs:
+            return verbs[args[0]](args[1:])
     except SystemExit as exc:  # argparse usage errors (2) and --help (0)
         return exc.code
+    except Exception as exc:  # noqa: BLE001 - one line, never a traceback
+        from .graph import CliError
+        if isinstance(exc, (CliError, ValueError)):
+            return _error(str(exc))
+        return _error(f'ros2 {args[0]}: {type(exc).__name__}: {exc}')
     if not args:
         return _unavailable('ros2', 'no verb given, and the full ros2 CLI is not available here')
     return _unavailable(f'ros2 {args[0]}')
