@@ -7,6 +7,8 @@
     ros2 run irb_bringup ctl reset      # clear the drive's latched error (simulator or
                                         # axis_bridge ~/reset; pdplus's ~/reset if it has one)
     ros2 run irb_bringup ctl hold       # pdplus ~/hold, where pdplus offers it
+    ros2 run irb_bringup ctl wait hold  # until pdplus is in that mode (a motion ended in
+                                        # hold); exit 1 with the reason if it stops
 
 Exit codes: 0 done; 1 refused by the node (its message is printed); 2 node or service not
 there, or no answer within --timeout. Every wait is bounded. The text and the rates come from
@@ -19,7 +21,7 @@ import os
 import sys
 import time
 
-COMMANDS = ('status', 'enable', 'stop', 'reset', 'hold')
+COMMANDS = ('status', 'enable', 'stop', 'reset', 'hold', 'wait')
 #: the graph is taken as discovered once pdplus's services are unchanged this long [s]
 SETTLE_S = 1.0
 
@@ -34,11 +36,16 @@ def parse_args(argv):
     p.add_argument('command', choices=COMMANDS, help='status: what pdplus, its plan and the '
                    'drive report, and the rates of the main topics; enable|stop|hold: '
                    "pdplus's std_srvs/Trigger service of that name; reset: the drive's "
-                   '~/reset (and pdplus\'s, where it has one)')
+                   '~/reset (and pdplus\'s, where it has one); wait MODE: until pdplus '
+                   'reports MODE (idle, ramp, path, time, hold, stopped)')
+    p.add_argument('mode', nargs='?', default='',
+                   help='wait: the mode to wait for (a resting mode, idle or hold, is waited '
+                   'for after a motion: ctl enable; ctl wait hold)')
     p.add_argument('--pdplus', default='/pdplus', help='the controller node; its namespace is '
                    'that of the topics and of the drive (default: /pdplus)')
     p.add_argument('--timeout', type=float, default=10.0,
-                   help='longest wait for the node and for each answer [s] (default: 10)')
+                   help='longest wait for the node and for each answer [s] (default: 10; '
+                   'wait: for the mode)')
     p.add_argument('--window', type=float, default=1.0,
                    help='status: how long the topic rates are measured [s] (default: 1)')
     return p.parse_args(argv)
@@ -239,6 +246,43 @@ def trigger(a, ros_args) -> int:
     return worst
 
 
+def wait(a, ros_args) -> int:
+    """Follow pdplus's /controller_state until ``wait_outcome`` decides (bounded)."""
+    from irb_bringup import ctl_core as core
+    from irb_control.pd_plus import MODE_NAMES
+    from irb_interfaces.msg import ControllerState
+    from rclpy.qos import qos_profile_sensor_data
+    s = _Session(ros_args)
+    state = {'moving': False, 'code': None, 'mode': None, 'reason': ''}
+    try:
+        ns, _ = core.split_node(a.pdplus)
+
+        def on_state(msg):
+            if state['code'] is not None:
+                return
+            name = MODE_NAMES.get(msg.mode, str(msg.mode))
+            if name not in core.RESTING:
+                state['moving'] = True
+            state['mode'], state['reason'] = name, msg.stop_reason
+            state['code'] = core.wait_outcome(a.mode, msg.mode, msg.stop_reason,
+                                              state['moving'])
+        s.node.create_subscription(ControllerState, core.join_name(ns, 'controller_state'),
+                                   on_state, qos_profile_sensor_data)
+        s.spin_for(a.timeout, until=lambda: state['code'] is not None)
+    finally:
+        s.close()
+    if state['code'] == core.OK:
+        print(f'pdplus: {a.mode}')
+        return core.OK
+    if state['code'] == core.REFUSED:
+        print(f'pdplus stopped: {state["reason"] or "(no reason given)"} '
+              '(ctl status; ctl enable to go on)', file=sys.stderr)
+        return core.REFUSED
+    seen = f'last mode {state["mode"]}' if state['mode'] else 'no /controller_state'
+    print(f'wait {a.mode}: not reached within {a.timeout:g} s ({seen})', file=sys.stderr)
+    return core.UNAVAILABLE
+
+
 def main(args=None):
     argv = list(sys.argv[1:] if args is None else args)
     mine, ros_args = _split_ros_args(argv)
@@ -246,8 +290,20 @@ def main(args=None):
     if a.timeout <= 0 or a.window <= 0:
         print('ctl: --timeout and --window must be > 0', file=sys.stderr)
         return 2
+    if (a.command == 'wait') != bool(a.mode):
+        print('ctl: a mode goes with wait and only with wait (ctl wait hold)', file=sys.stderr)
+        return 2
+    if a.command == 'wait' and a.mode not in ('idle', 'ramp', 'path', 'time', 'hold',
+                                               'stopped'):
+        print(f'ctl wait: unknown mode {a.mode!r} (idle, ramp, path, time, hold, stopped)',
+              file=sys.stderr)
+        return 2
     try:
-        return status(a, ros_args) if a.command == 'status' else trigger(a, ros_args)
+        if a.command == 'status':
+            return status(a, ros_args)
+        if a.command == 'wait':
+            return wait(a, ros_args)
+        return trigger(a, ros_args)
     except KeyboardInterrupt:
         return 130
 

@@ -151,3 +151,20 @@ def missing_service_text(command: str, pdplus: str, offered: list[str]) -> str:
     """One line: pdplus does not offer the service ``command`` needs."""
     return (f"{command}: {pdplus} offers no ~/{PDPLUS_SERVICES[command]} service (it offers: "
             f"{', '.join(sorted(offered)) or 'none'})")
+
+
+def wait_outcome(target: str, mode: int, stop_reason: str, seen_moving: bool) -> int | None:
+    """``ctl wait``'s verdict on one ControllerState: OK once pdplus is in mode ``target``
+    (after having moved, when ``target`` is a resting mode: a wait for 'hold' started before
+    the motion began must not end on the hold it started from), REFUSED when it is stopped
+    (the latched stop ends the wait: it will not leave it by itself), None to keep waiting."""
+    if mode == MODE_STOPPED and target != 'stopped':
+        return REFUSED
+    if MODE_NAMES.get(mode) == target and (seen_moving or target not in RESTING):
+        return OK
+    return None
+
+
+#: modes pdplus rests in after a motion; ``ctl wait`` for one waits for a motion to end there
+RESTING = ('idle', 'hold')
+

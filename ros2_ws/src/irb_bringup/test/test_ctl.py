@@ -12,7 +12,7 @@ import threading
 import pytest
 from irb_bringup import ctl_core as core
 from irb_bringup.ctl import main
-from irb_control.pd_plus import MODE_PATH, MODE_STOPPED
+from irb_control.pd_plus import MODE_HOLD, MODE_IDLE, MODE_PATH, MODE_RAMP, MODE_STOPPED
 
 BOUND_S = 60.0
 PERIOD_S = 0.01
@@ -25,6 +25,27 @@ def test_topic_rate_from_arrivals():
                                                  pytest.approx(0.03))
     assert math.isnan(core.topic_rate('/t', [1.0]).rate_hz)
     assert core.topic_rate('/t', []).count == 0
+
+
+def test_wait_outcome_follows_a_motion_to_its_end():
+    # ctl wait hold, started while pdplus still holds from before: not done until it moved
+    seq = [(MODE_HOLD, False), (MODE_RAMP, True), (MODE_PATH, True), (MODE_HOLD, True)]
+    verdicts = [core.wait_outcome('hold', m, '', moved) for m, moved in seq]
+    assert verdicts == [None, None, None, core.OK]
+    # a latched stop ends any wait but one for 'stopped', with REFUSED
+    assert core.wait_outcome('hold', MODE_STOPPED, 'watchdog', True) == core.REFUSED
+    assert core.wait_outcome('stopped', MODE_STOPPED, 'watchdog', False) == core.OK
+    # a moving mode is reached without a motion before it
+    assert core.wait_outcome('path', MODE_PATH, '', False) == core.OK
+    assert core.wait_outcome('idle', MODE_IDLE, '', False) is None
+
+
+def test_wait_arguments_are_checked(capsys):
+    assert main(['wait']) == 2
+    assert main(['wait', 'sideways']) == 2
+    assert main(['status', 'hold']) == 2
+    err = capsys.readouterr().err
+    assert 'unknown mode' in err and 'goes with wait' in err
 
 
 def test_names():
