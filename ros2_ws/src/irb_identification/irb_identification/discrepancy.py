@@ -49,7 +49,7 @@ def main(args=None) -> int:
     from .discrepancy_core.report import write_report
     from .discrepancy_core.workflow import WorkflowConfig, run_workflow, write_updated_model
     from irb_description.friction import FrictionMapError
-    from .discrepancy_core.report import answer_line
+    from .discrepancy_core.report import answer_line, data_line
     try:
         config = WorkflowConfig.from_yaml(opts.config or default_config_path())
         for b in opts.bag + opts.holdout_bag:
@@ -67,6 +67,7 @@ def main(args=None) -> int:
     r = result.report
     print(f"discrepancy: {r['effect']}, confidence {r['confidence']:.2f}: {answer_line(r)}; "
           f"report {path}")
+    print(f'discrepancy: {data_line(r)}')
     return 0
 
 

@@ -133,11 +133,17 @@ def _stamp_ns(rows: np.ndarray) -> np.ndarray:
     return sec * 1_000_000_000 + nsec
 
 
-def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray) -> JointSeries:
+FIELDS = ('position', 'velocity', 'effort')
+
+
+def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
+                        require: tuple[str, ...] = FIELDS) -> JointSeries:
     """JointSeries from CDR payloads (N,) and their log times [ns] (N,).
 
-    Requires the same joint names in every message and position/velocity/effort of the
-    names' length; raises JointStateError otherwise (e.g. "no effort").
+    Requires the same joint names in every message and, for each field of ``require``, that
+    field with the names' length in at least one message; raises JointStateError otherwise
+    (e.g. "no effort"). Fields not required and not carried are NaN (a torque command is a
+    JointState with effort only: ``require=('effort',)``).
     """
     if not data:
         raise JointStateError('no JointState messages')
@@ -171,8 +177,8 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray) -> 
             for k, (off, cnt) in enumerate(zip(lay_i.offsets, lay_i.counts)):
                 if cnt == n:
                     out[k, i] = np.frombuffer(data[i], '<f8', n, off)
-    for k, field in enumerate(('position', 'velocity', 'effort')):
-        if np.all(np.isnan(out[k])):
+    for k, field in enumerate(FIELDS):
+        if field in require and np.all(np.isnan(out[k])):
             raise JointStateError(f'JointState messages carry no {field}')
     t = np.where(stamps > 0, stamps, log_t)
     if np.any(np.diff(t) < 0):
