@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bagio import BagError, BagWriter, TopicInfo, qos_profile_dict, read_messages
+from ..bagio import BagError, BagWriter, TopicInfo, qos_profile_dict
 from ..gaps import GapConfig, SeriesCheck
 from ..series import JOINT_STATE, encode_joint_states
 
@@ -155,8 +155,9 @@ def run_pieces(run: RunData, gaps: GapConfig = GapConfig(), label: str | None = 
     need. Commands and camera: duplicates dropped, their gaps reported; a piece keeps the
     commands and camera samples of its own time span, and residuals.prepare_run does not
     interpolate commands across a command gap. Returns (pieces, checks of the three
-    series; ``label`` names the bag in them). Raises gaps.GapError (one line) when ``on_gap`` is 'refuse' and the joint
-    states have a gap, or when no piece is long enough.
+    series; ``label`` names the bag in them). Raises gaps.GapError (one line) when
+    ``on_gap`` is 'refuse' and the joint states have a gap, or when no piece is long
+    enough.
     """
     from ..gaps import check_series, fill_grid
     label = label or run.name or 'run'
