@@ -167,7 +167,7 @@ class SeriesCheck:
 def period_of(t: np.ndarray, config: GapConfig) -> tuple[float, str]:
     """(period used [s], note): the nominal period, or the median step if it is far off."""
     steps = np.diff(np.asarray(t, float))
-    steps = steps[steps > config.duplicate_factor * config.period_s]
+    steps = steps[steps > 0]
     if not len(steps):
         return config.period_s, ''
     med = float(np.median(steps))

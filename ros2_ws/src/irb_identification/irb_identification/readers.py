@@ -120,7 +120,7 @@ def joint_series(msgs: TopicMessages, bag, require=FIELDS,
     if not msgs.data:
         raise BagError(f'bag {bag}: {topic} has no messages')
     try:
-        s = decode_joint_states(msgs.data, msgs.t_ns, require)
+        s = decode_joint_states(msgs.data, msgs.t_ns, require, joints)
         return s.select(list(joints)) if joints else s
     except JointStateError as exc:
         what = QUANTITY.get(topic)
