@@ -151,5 +151,22 @@ def checked(series: JointSeries, bag, topic: str, config: GapConfig = GapConfig(
     return dedupe(series, keep), chk, segs
 
 
-__all__ = ['COMMAND_TOPIC', 'STATE_TOPIC', 'checked', 'companion', 'dedupe', 'expand_bags',
+def copy_bag(src, dst, keep=None, topics=None) -> Path:
+    """A copy of bag ``src`` at ``dst`` (must not exist) with the messages of ``topics`` (all
+    if None) that ``keep(topic, index in topic, log time [ns])`` accepts (all if None): to
+    split a bag by topic or to make a lossy copy for tests."""
+    from .bagio import BagWriter, TopicInfo, topic_qos
+    msgs = read_messages(src, topics)
+    qos = topic_qos(src)
+    events = sorted((t, topic, i) for topic, m in msgs.items() for i, t in enumerate(m.t_ns))
+    with BagWriter(dst, split_period_s=1e9) as w:
+        for topic, m in msgs.items():
+            w.add_topic(TopicInfo.for_type(topic, m.msgtype, qos.get(topic, [])))
+        for t, topic, i in events:
+            if keep is None or keep(topic, i, t):
+                w.write(topic, t, msgs[topic].data[i])
+    return Path(dst)
+
+
+__all__ = ['COMMAND_TOPIC', 'copy_bag', 'STATE_TOPIC', 'checked', 'companion', 'dedupe', 'expand_bags',
            'joint_series', 'not_a_bag', 'read_joint_states', 'read_topics', 'topic_sources']

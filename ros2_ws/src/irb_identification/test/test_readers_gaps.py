@@ -13,7 +13,7 @@ import pytest
 
 from irb_identification import bagio, discrepancy, identify
 from irb_identification.gaps import (GapConfig, GapError, check_series, fill_grid)
-from irb_identification.readers import expand_bags
+from irb_identification.readers import copy_bag, expand_bags
 
 plant_mod = pytest.importorskip('irb_control.plant')
 from irb_identification.discrepancy_core.bagdata import RunData  # noqa: E402
@@ -42,20 +42,6 @@ def lossy(runs, rng, fraction=0.065, hole_run=1, hole=(1.5, 2.54)):
             keep &= ~((r.t > r.t[0] + hole[0]) & (r.t < r.t[0] + hole[1]))
         out.append(drop(r, keep))
     return out
-
-
-def copy_bag(src, dst, keep=lambda topic, i, t_ns: True, topics=None):
-    """A copy of bag ``src`` at ``dst`` with the messages ``keep`` accepts (our writer)."""
-    msgs = bagio.read_messages(src, topics)
-    qos = bagio.topic_qos(src)
-    events = sorted((t, topic, i) for topic, m in msgs.items() for i, t in enumerate(m.t_ns))
-    with bagio.BagWriter(dst, split_period_s=1e9) as w:
-        for topic, m in msgs.items():
-            w.add_topic(bagio.TopicInfo.for_type(topic, m.msgtype, qos.get(topic, [])))
-        for t, topic, i in events:
-            if keep(topic, i, t):
-                w.write(topic, t, msgs[topic].data[i])
-    return dst
 
 
 # --- the check itself ------------------------------------------------------------------------
