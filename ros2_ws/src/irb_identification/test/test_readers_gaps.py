@@ -23,7 +23,8 @@ from irb_identification.discrepancy_core.workflow import (WorkflowConfig,  # noq
                                                           run_workflow)
 
 T = 0.004032
-PLAN = load_plan(discrepancy.default_config_path().parent / 'excitation.yaml', 'short')
+PLAN = load_plan(discrepancy.default_config_path().parent / 'excitation.yaml', 'short')[:3]
+FAST = 'discrepancy:\n  n_boot: 10\n'       # fewer bootstrap replicates: test time
 
 
 # --- helpers ---------------------------------------------------------------------------------
@@ -111,10 +112,12 @@ def test_discrepancy_with_gaps_answers_as_without(model, clean_runs, tmp_path):
         write_run(bad_dir / b.name, model.joint_names, r.t, r.q, r.qd, r.effort, r.cmd_t,
                   r.cmd, r.cam_t, r.cam_p)
     reports = {}
+    fast = tmp_path / 'fast.yaml'
+    fast.write_text(FAST)
     for name, folder in (('good', tmp_path / 'good'), ('lossy', bad_dir)):
         out = tmp_path / f'out_{name}'
         assert discrepancy.main(['--bag', str(folder), '--model', str(plant), '--out',
-                                 str(out), '--no-plots']) == 0
+                                 str(out), '--no-plots', '--config', str(fast)]) == 0
         reports[name] = json.loads((out / 'report.json').read_text())
         reports[name]['md'] = (out / 'report.md').read_text()
     g, b = reports['good'], reports['lossy']
@@ -133,7 +136,7 @@ def test_discrepancy_with_gaps_answers_as_without(model, clean_runs, tmp_path):
     # refuse: one line naming the bag, the topic and the gap; exit 1; nothing written
     out = tmp_path / 'out_refuse'
     cfg = tmp_path / 'refuse.yaml'
-    cfg.write_text('discrepancy:\n  n_boot: 5\n  gaps: {on_gap: refuse}\n')
+    cfg.write_text(FAST + '  gaps: {on_gap: refuse}\n')
     assert discrepancy.main(['--bag', str(bad_dir), '--model', str(plant), '--out', str(out),
                              '--config', str(cfg), '--no-plots']) == 1
     assert not (out / 'report.json').exists()
@@ -147,7 +150,7 @@ def test_discrepancy_names_the_effect_on_lossy_data(model, clean_runs, tmp_path)
     runs = [r.data for r in run_plan(model, PLAN, fm, fm, moderate_effect('torque_offset'),
                                      seed=2)]
     plant = plant_mod.default_plant_yaml()
-    cfg = WorkflowConfig(n_boot=20)
+    cfg = WorkflowConfig(n_boot=10)
     a = run_workflow(['x'] * len(runs), plant, cfg, model=model, runs=runs).report
     b = run_workflow(['x'] * len(runs), plant, cfg, model=model,
                      runs=lossy(runs, np.random.default_rng(3))).report
