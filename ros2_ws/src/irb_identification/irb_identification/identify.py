@@ -165,17 +165,17 @@ def main(args=None) -> int:
         series, checks = check_gaps(series, bags_read, gaps, opts.topic)
     except GapError as exc:
         return finish(1, str(exc))
+    report['complete_data'] = all(c.clean for c in checks)
+    report['data_quality'] = [c.as_dict() for c in checks]
+    for c in checks:
+        if not c.clean:
+            print(f'identify: data with gaps: {c.summary()}', file=sys.stderr)
     try:
         results = identify_joints(series, labels, kinds, joints or None, name_map, model,
                                   config, accels, opts.model_compensation,
                                   progress=lambda m: print(f'identify: {m}', flush=True))
     except IdentificationError as exc:
         return finish(1, str(exc))
-    report['complete_data'] = all(c.clean for c in checks)
-    report['data_quality'] = [c.as_dict() for c in checks]
-    for c in checks:
-        if not c.clean:
-            print(f'identify: data with gaps: {c.summary()}', file=sys.stderr)
     for r in results:
         report['joints'][r.name] = report_entry(r)
         print(f'identify: {summary_line(r)}')

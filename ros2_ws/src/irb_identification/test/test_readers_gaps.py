@@ -245,3 +245,10 @@ def test_excite_folder_and_bad_paths(model, clean_runs, tmp_path):
                              '--out', str(out)]) == 1
     from irb_identification.readers import not_a_bag
     assert 'is not a bag' in not_a_bag(empty) and 'killed' not in not_a_bag(empty)
+
+
+def test_config_gaps_section_is_the_declared_default():
+    """config/discrepancy.yaml's gaps: holds the values GapConfig declares (one source)."""
+    cfg = WorkflowConfig.from_yaml(discrepancy.default_config_path())
+    assert cfg.gaps == GapConfig()
+    assert cfg.gaps.split_s() == pytest.approx(4.5 * T)
