@@ -151,6 +151,40 @@ def checked(series: JointSeries, bag, topic: str, config: GapConfig = GapConfig(
     return dedupe(series, keep), chk, segs
 
 
+def stamps(msgs: TopicMessages) -> np.ndarray:
+    """(N,) [s] times of a topic's messages: header stamps for a type whose first field is
+    a std_msgs/Header (where non-zero), else the log times; sorted."""
+    log = np.asarray(msgs.t_ns, np.int64)
+    t = log.copy()
+    has_header = False
+    try:
+        from .bagio import typestore
+        fields = typestore([msgs.msgtype]).fielddefs[msgs.msgtype][1]
+        has_header = bool(fields) and fields[0][0] == 'header'
+    except Exception:  # noqa: BLE001 - an unknown type: log times
+        has_header = False
+    if has_header and msgs.data:
+        head = np.frombuffer(b''.join(d[4:12] for d in msgs.data), np.uint8).reshape(-1, 8)
+        sec = head[:, :4].copy().view('<i4')[:, 0].astype(np.int64)
+        nsec = head[:, 4:].copy().view('<u4')[:, 0].astype(np.int64)
+        st = sec * 1_000_000_000 + nsec
+        t = np.where(st > 0, st, log)
+    return np.sort(t) * 1e-9
+
+
+def check_topic(bag, topic: str, config: GapConfig = GapConfig(),
+                period_s: float | None = None) -> SeriesCheck:
+    """Gaps and duplicates of any stamped topic of a bag (or its companion) against
+    ``period_s`` (default config.period_s; the check uses the median step when it is far
+    off, e.g. the camera's 100 Hz). GapError (one line) when config.on_gap is 'refuse' and
+    there is a gap. For reports: ``.summary()``, ``.as_dict()``."""
+    msgs, src = read_topics(bag, [topic])
+    soft = config if config.on_gap == 'refuse' else GapConfig(
+        **{**config.__dict__, 'min_segment_s': 0.0})
+    chk, _, _ = check_series(stamps(msgs[topic]), str(src[topic]), topic, soft, period_s)
+    return chk
+
+
 def copy_bag(src, dst, keep=None, topics=None) -> Path:
     """A copy of bag ``src`` at ``dst`` (must not exist) with the messages of ``topics`` (all
     if None) that ``keep(topic, index in topic, log time [ns])`` accepts (all if None): to
@@ -168,5 +202,5 @@ def copy_bag(src, dst, keep=None, topics=None) -> Path:
     return Path(dst)
 
 
-__all__ = ['COMMAND_TOPIC', 'copy_bag', 'STATE_TOPIC', 'checked', 'companion', 'dedupe', 'expand_bags',
+__all__ = ['COMMAND_TOPIC', 'check_topic', 'copy_bag', 'stamps', 'STATE_TOPIC', 'checked', 'companion', 'dedupe', 'expand_bags',
            'joint_series', 'not_a_bag', 'read_joint_states', 'read_topics', 'topic_sources']

@@ -252,3 +252,21 @@ def test_config_gaps_section_is_the_declared_default():
     cfg = WorkflowConfig.from_yaml(discrepancy.default_config_path())
     assert cfg.gaps == GapConfig()
     assert cfg.gaps.split_s() == pytest.approx(4.5 * T)
+
+
+def test_check_topic_reads_header_stamps_of_any_stamped_topic(model, clean_runs, tmp_path):
+    """readers.check_topic (what the run report calls): header stamps of /joint_states and
+    /camera/tcp (100 Hz: its own period), a hole found in a copy without some messages."""
+    from irb_identification.readers import check_topic
+    runs, _ = clean_runs
+    bag = write_runs(runs[:1], tmp_path / 'one', model.joint_names)[0]
+    assert check_topic(bag, '/joint_states').clean
+    cam = check_topic(bag, '/camera/tcp')
+    assert cam.clean and cam.period_s == pytest.approx(0.01, rel=0.05)
+    t0 = bagio.read_messages(bag, ['/camera/tcp'])['/camera/tcp'].t_ns[0]
+    holed = copy_bag(bag, tmp_path / 'holed', lambda topic, i, t: not (
+        topic == '/camera/tcp' and 1.0e9 < t - t0 < 1.5e9))
+    chk = check_topic(holed, '/camera/tcp')
+    assert len(chk.gaps) == 1 and chk.gaps[0].length_s == pytest.approx(0.51, abs=0.011)
+    with pytest.raises(GapError):
+        check_topic(holed, '/camera/tcp', GapConfig(on_gap='refuse'))
