@@ -202,5 +202,6 @@ def copy_bag(src, dst, keep=None, topics=None) -> Path:
     return Path(dst)
 
 
-__all__ = ['COMMAND_TOPIC', 'check_topic', 'copy_bag', 'stamps', 'STATE_TOPIC', 'checked', 'companion', 'dedupe', 'expand_bags',
-           'joint_series', 'not_a_bag', 'read_joint_states', 'read_topics', 'topic_sources']
+__all__ = ['COMMAND_TOPIC', 'STATE_TOPIC', 'check_topic', 'checked', 'companion', 'copy_bag',
+           'dedupe', 'expand_bags', 'joint_series', 'not_a_bag', 'read_joint_states',
+           'read_topics', 'stamps', 'topic_sources']

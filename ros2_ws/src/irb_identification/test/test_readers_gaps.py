@@ -225,19 +225,32 @@ def test_identify_with_gaps_agrees_with_complete_data(sweeps, tmp_path, method, 
 
 
 # --- every bag the project records -----------------------------------------------------------
-def test_excite_folder_and_bad_paths(model, clean_runs, tmp_path):
-    """An excite output folder is a folder of bags, not 'left by a killed recorder'; a
-    directory that is not a bag says so."""
-    runs, _ = clean_runs
+def test_excite_folder_and_bad_paths(tmp_path):
+    """An excite output folder (the excite CLI, a two-run plan) is read as its bags, not
+    'left by a killed recorder'; a directory that is not a bag says so."""
+    from irb_identification import excite
+    plan = tmp_path / 'plan.yaml'
+    plan.write_text('excitation:\n  plans:\n    two:\n'
+                    '      - {kind: sweep, duration_s: 3.0, cycles: [1, 1, 2], '
+                    'peak_speed: [0.6, 0.5, 0.6], q0: [-0.3, 0.2, -0.6]}\n'
+                    '      - {kind: circle, duration_s: 3.0}\n')
     folder = tmp_path / 'excite1'
-    bags = write_runs(runs[:2], folder, model.joint_names)
-    assert expand_bags([folder]) == bags
+    assert excite.main(['--out', str(folder), '--plan', 'two', '--plan-file', str(plan)]) == 0
+    bags = sorted(folder.iterdir())
+    assert len(bags) == 2 and expand_bags([folder]) == bags
     j = tmp_path / 'x.json'
     code = identify.main(['--bag', str(folder), '--out', str(tmp_path / 'x.yaml'), '--json',
                           str(j), '--no-plots', '--method', 'samples'])
     rep = json.loads(j.read_text())
     assert rep['bags'] == [str(b) for b in bags] and not rep['problems'], rep['problems']
     assert set(rep['joints']) == {'joint_1', 'joint_2', 'joint_3'} and code in (0, 2)
+    fast = tmp_path / 'fast.yaml'
+    fast.write_text(FAST)
+    assert discrepancy.main(['--bag', str(folder), '--model', str(plant_mod.default_plant_yaml()),
+                             '--out', str(tmp_path / 'd'), '--no-plots', '--config',
+                             str(fast)]) == 0
+    d = json.loads((tmp_path / 'd' / 'report.json').read_text())
+    assert d['bags'] == [str(b) for b in bags] and d['data_quality']['complete']
     empty = tmp_path / 'empty'
     empty.mkdir()
     out = tmp_path / 'o'

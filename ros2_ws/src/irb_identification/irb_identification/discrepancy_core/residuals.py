@@ -30,8 +30,8 @@ class ResidualConfig:
     """window_s [s] SG window (upper bound), sg_order, v_min [rad/s], command_lag_samples,
     period_s [s], edge_s [s], gap_factor [-] (a command step longer than this x period is a
     gap the command channel does not interpolate across); the window adapts to the
-    excitation: at most ``window_per_reversal`` times the median time between velocity reversals of the run, at
-    least ``min_window_s`` (see ``smoothing_window``)."""
+    excitation: at most ``window_per_reversal`` times the median time between velocity
+    reversals of the run, at least ``min_window_s`` (see ``smoothing_window``)."""
 
     window_s: float = 0.1
     sg_order: int = 3
