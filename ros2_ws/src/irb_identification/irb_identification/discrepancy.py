@@ -3,7 +3,13 @@ add it, show the gap shrink on held-out data (DESIGN.md §8).
 
     ros2 run irb_identification discrepancy --bag DIR [--bag DIR ...] --model PATH --out DIR
 
-Offline (no ROS graph). Exit code 0 on success (also when the answer is 'none'), 1 on bad input.
+Offline (no ROS graph). A --bag is a bag from the recorder, a main-job run bag (its ``_drive``
+companion supplies /torque_command) or a folder of bags (excite's output). Measured q, qd and
+effort come from /joint_states, commands from /torque_command, the TCP from /camera/tcp.
+Gaps: every series is checked against the nominal 4.032 ms period; runs are analysed in
+gap-free pieces and the report says what was missing (``data_quality``), or, with ``--gaps
+refuse``, a gap is an error naming the bag, topic and gap. Exit code 0 on success (also when
+the answer is 'none'), 1 on bad input or a refused gap.
 """
 from __future__ import annotations
 
@@ -24,6 +30,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--config', default=None,
                    help='settings YAML (default: config/discrepancy.yaml of the package)')
     p.add_argument('--no-plots', action='store_true')
+    p.add_argument('--gaps', default=None, choices=('segment', 'refuse'),
+                   help="gaps in the joint states: 'segment' analyses the gap-free pieces and "
+                   "says so in the report, 'refuse' stops with one line naming the bag, topic "
+                   "and gap (default: the config's gaps.on_gap, segment)")
     return p
 
 
@@ -45,19 +55,26 @@ def main(args=None) -> int:
     if '--ros-args' in argv:
         argv = argv[:argv.index('--ros-args')]
     opts = _parser().parse_args(argv)
+    from dataclasses import replace
+
     from .bagio import BagError
+    from .readers import expand_bags, not_a_bag
     from .discrepancy_core.report import write_report
     from .discrepancy_core.workflow import WorkflowConfig, run_workflow, write_updated_model
     from irb_description.friction import FrictionMapError
-    from .discrepancy_core.report import answer_line
+    from .discrepancy_core.report import answer_line, data_line
     try:
         config = WorkflowConfig.from_yaml(opts.config or default_config_path())
-        for b in opts.bag + opts.holdout_bag:
-            if not Path(b).exists():
-                raise ValueError(f'bag {b} does not exist')
+        if opts.gaps:
+            config = replace(config, gaps=replace(config.gaps, on_gap=opts.gaps))
+        bags, holdout = expand_bags(opts.bag), expand_bags(opts.holdout_bag)
+        for b in bags + holdout:
+            why = not_a_bag(Path(b))
+            if why:
+                raise ValueError(why)
         out = Path(opts.out)
         out.mkdir(parents=True, exist_ok=True)
-        result = run_workflow(opts.bag, opts.model, config, opts.holdout_bag,
+        result = run_workflow(bags, opts.model, config, holdout,
                               log=lambda s: print(f'discrepancy: {s}'))
     except (BagError, FrictionMapError, ValueError, OSError, TypeError, KeyError) as exc:
         print(f'discrepancy: {exc}', file=sys.stderr)
@@ -67,6 +84,7 @@ def main(args=None) -> int:
     r = result.report
     print(f"discrepancy: {r['effect']}, confidence {r['confidence']:.2f}: {answer_line(r)}; "
           f"report {path}")
+    print(f'discrepancy: {data_line(r)}')
     return 0
 
 

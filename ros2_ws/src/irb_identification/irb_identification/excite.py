@@ -10,7 +10,8 @@ The plant is irb_control's (closed loop with the PD+ controller, 5 substeps, 3-s
 encoder + 100 Hz camera); its friction and effects come from the plant YAML (default
 irb_control config/plant.yaml), ``--effect`` adds effects at their moderate size (irb_control
 plant_effects.MODERATE) times SCALE. The controller's feed-forward map is ``--model``
-(default: the plant YAML's map).
+(default: the plant YAML's map). ``--out`` becomes a folder of complete bags, one per run
+(``excite_00_<run>``, ...); ``discrepancy`` and ``identify`` take the folder as one --bag.
 """
 from __future__ import annotations
 
@@ -138,7 +139,8 @@ def main(args=None) -> int:
     bags = write_runs(runs, out, model.joint_names,
                       custom_data={'effects': ','.join(fx.names()) or 'none',
                                    'seed': opts.seed})
-    print(f'excite: {len(bags)} bags in {out}')
+    print(f'excite: {len(bags)} bags in {out} (a folder of bags: pass it as it is, '
+          f'discrepancy --bag {out} reads them all)')
     return 0
 
 

@@ -4,9 +4,15 @@
         [--json report.json] [--method auto|sweep|samples] [--torque-kind auto|friction|total]
         [--joints a,b] [--map-joint BAG_NAME:MODEL_NAME ...]
 
-Offline (no ROS graph needed). Exit code 0: every joint identified with a trusted fit; 2: some
-joints failed or are marked degenerate (the map says which, with the reason); 1: nothing
-identified, no usable bag, or bad names. ``--json`` is written in every case.
+Offline (no ROS graph needed). ``--bag`` takes a bag, a main-job run bag (its ``_drive``
+companion is read with it) or a folder of bags (excite's output). Every joint-state series is
+checked against the nominal 4.032 ms period: duplicates are dropped, holds and derivatives
+stop at gaps longer than ``--gap-bridge-samples`` missing samples, and the output says what
+was missing (``data_quality`` in the JSON, the map's ``source``, one line per series); with
+``--gaps refuse`` any gap is an error naming the bag, topic and gap. Exit code 0: every joint
+identified with a trusted fit; 2: some joints failed or are marked degenerate (the map says
+which, with the reason); 1: nothing identified, no usable bag, a refused gap, or bad names.
+``--json`` is written in every case.
 """
 from __future__ import annotations
 
@@ -20,10 +26,13 @@ import yaml
 
 from .bagio import BagError
 from .friction_fit import FitConfig, IdentificationError, friction_map
-from .pipeline import METHODS, PipelineConfig, identify_joints, report_entry, summary_line
+from .gaps import ON_GAP, GapConfig, GapError
+from .pipeline import (METHODS, PipelineConfig, check_gaps, identify_joints, report_entry,
+                       summary_line)
+from .readers import expand_bags, read_joint_states
 from .sample_fit import SampleFitConfig
 from .segments import SegmentConfig
-from .series import JointStateError, read_joint_series
+from .series import JointStateError
 
 TORQUE_KIND_KEY = 'irb_identification.torque_kind'
 ACCEL_TOPIC = '/joint_accelerations'
@@ -60,6 +69,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--effort-lag-s', type=float, default=0.0,
                    help='[s] sweep: the effort of a sample is the torque that acted this long '
                    'before it (see README)')
+    gaps = GapConfig()
+    p.add_argument('--gaps', default=gaps.on_gap, choices=ON_GAP,
+                   help='segment: analyse around gaps in the joint states (holds and '
+                   'derivatives stop at long gaps; the output says what was missing); '
+                   'refuse: any gap is an error naming the bag, topic and gap')
+    p.add_argument('--period-s', type=float, default=gaps.period_s,
+                   help='[s] nominal sample period the stamps are checked against')
+    p.add_argument('--gap-bridge-samples', type=int, default=gaps.bridge_samples,
+                   help='[samples] gaps of at most this many missing samples are bridged; '
+                   'longer ones end holds and derivatives')
     p.add_argument('--json', default=None, help='also write a JSON report here (always)')
     return p
 
@@ -75,13 +94,12 @@ def bag_torque_kind(bag: str) -> str | None:
 
 
 def _read_accel(bag: str):
-    from .bagio import bag_topics
-    from .series import decode_joint_states
-    if ACCEL_TOPIC not in bag_topics(bag):
+    from .readers import joint_series, read_topics, topic_sources
+    if ACCEL_TOPIC not in topic_sources(bag):
         return None
-    from .bagio import read_messages
-    msgs = read_messages(bag, [ACCEL_TOPIC])[ACCEL_TOPIC]
-    return decode_joint_states(msgs.data, msgs.t_ns) if msgs.data else None
+    msgs, src = read_topics(bag, [ACCEL_TOPIC])
+    m = msgs[ACCEL_TOPIC]
+    return joint_series(m, src[ACCEL_TOPIC], ('position',)) if m.data else None
 
 
 def main(args=None) -> int:
@@ -109,12 +127,19 @@ def main(args=None) -> int:
         if not sep or not a or not b:
             return finish(1, f'--map-joint {spec!r}: expected BAG_NAME:NAME')
         name_map[a] = b
+    try:
+        gaps = GapConfig(period_s=opts.period_s, bridge_samples=opts.gap_bridge_samples,
+                         on_gap=opts.gaps)
+    except ValueError as exc:
+        return finish(1, str(exc))
     from irb_description.model import RobotModel
     model = RobotModel.load()
-    series, labels, kinds, accels = [], [], [], []
-    for bag in opts.bag:
+    series, labels, kinds, accels, bags_read = [], [], [], [], []
+    bags = [str(b) for b in expand_bags(opts.bag)]
+    report['bags'] = bags
+    for bag in bags:
         try:
-            s = read_joint_series(bag, opts.topic)
+            s = read_joint_states(bag, opts.topic)
             accel = _read_accel(bag)
         except (BagError, JointStateError) as exc:
             report['problems'].append(str(exc))
@@ -122,6 +147,7 @@ def main(args=None) -> int:
             continue
         series.append(s)
         labels.append(Path(bag).name)
+        bags_read.append(bag)
         kinds.append(opts.torque_kind if opts.torque_kind != 'auto'
                      else bag_torque_kind(bag) or 'total')
         accels.append(accel)
@@ -131,9 +157,19 @@ def main(args=None) -> int:
     config = PipelineConfig(
         method=opts.method,
         fit=FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds,
-                      segments=SegmentConfig(effort_lag_s=opts.effort_lag_s)),
-        samples=SampleFitConfig(v_min=opts.v_min))
+                      segments=SegmentConfig(effort_lag_s=opts.effort_lag_s,
+                                             split_gap_s=gaps.split_s())),
+        samples=SampleFitConfig(v_min=opts.v_min), gaps=gaps)
     joints = [j.strip() for j in opts.joints.split(',') if j.strip()]
+    try:
+        series, checks = check_gaps(series, bags_read, gaps, opts.topic)
+    except GapError as exc:
+        return finish(1, str(exc))
+    report['complete_data'] = all(c.clean for c in checks)
+    report['data_quality'] = [c.as_dict() for c in checks]
+    for c in checks:
+        if not c.clean:
+            print(f'identify: data with gaps: {c.summary()}', file=sys.stderr)
     try:
         results = identify_joints(series, labels, kinds, joints or None, name_map, model,
                                   config, accels, opts.model_compensation,
@@ -146,6 +182,12 @@ def main(args=None) -> int:
         for w in r.warnings:
             print(f'identify: note: {w}', file=sys.stderr)
     source = 'identified from ' + ', '.join(labels)
+    gappy = [c for c in checks if not c.clean]
+    if gappy:
+        source += (' (DATA WITH GAPS: ' + '; '.join(
+            f'{Path(c.bag).name} {c.missing} samples missing in {len(c.gaps)} gap(s), '
+            f'largest {c.largest().length_s:.3f} s' if c.gaps else
+            f'{Path(c.bag).name} {c.duplicates} duplicates dropped' for c in gappy) + ')')
     fill = None
     if opts.fill_nominal:
         fill = model.friction

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from irb_description.friction import JointFriction
 
+from .gaps import GapConfig, GapError, check_series
 from .friction_fit import (FitConfig, IdentificationError, JointResult, choose_order,
                            fit_polynomial, identify_series)
 from .sample_fit import SampleFitConfig, SampleFitError, binned_means, fit_samples
@@ -37,7 +38,11 @@ class PipelineConfig:
     accel_check_window_s [s], accel_tolerance [rad/s^2]: where q_dd over the short window
     differs from q_dd over the long one by more than accel_tolerance + 10 %, the acceleration
     is not resolved (a step in q_dd: ramps, impacts) and M q_dd cannot be subtracted there:
-    those samples are left out of a total-torque fit (counted in the notes)."""
+    those samples are left out of a total-torque fit (counted in the notes). gaps: how
+    gaps and duplicates in the series are found and treated (gaps.GapConfig): duplicates
+    are dropped, q_dd is computed per stretch between gaps (any missing sample),
+    holds end at such gaps (fit.segments.split_gap_s), every joint's warnings say what was
+    missing, and on_gap 'refuse' raises gaps.GapError."""
 
     method: str = 'auto'
     fit: FitConfig = field(default_factory=FitConfig)
@@ -46,6 +51,7 @@ class PipelineConfig:
     accel_window_s: float = 0.05
     accel_check_window_s: float = 0.02
     accel_tolerance: float = 0.5
+    gaps: GapConfig = field(default_factory=GapConfig)
 
 
 def rename(series: JointSeries, name_map: dict[str, str]) -> JointSeries:
@@ -54,9 +60,25 @@ def rename(series: JointSeries, name_map: dict[str, str]) -> JointSeries:
                        series.position, series.velocity, series.effort)
 
 
-def acceleration(t: np.ndarray, v: np.ndarray, window_s: float) -> np.ndarray:
+def acceleration(t: np.ndarray, v: np.ndarray, window_s: float,
+                 split_s: float | None = None) -> np.ndarray:
     """q_dd (N, n) [rad/s^2] from speeds v (N, n) at irregular times t (N,): v resampled to
-    the median step, Savitzky-Golay derivative (order 2, ``window_s``), interpolated back."""
+    the median step, Savitzky-Golay derivative (order 2, ``window_s``), interpolated back.
+    With ``split_s`` [s], separately on each stretch between steps at least that long (no
+    derivative across a gap in the data)."""
+    if split_s is not None and len(t) > 1:
+        cut = np.flatnonzero(np.diff(t) >= split_s) + 1
+        if len(cut):
+            edges = np.concatenate([[0], cut, [len(t)]])
+            out = np.zeros_like(v, dtype=float)
+            for a, b in zip(edges[:-1], edges[1:]):
+                if b - a >= 2:
+                    out[a:b] = acceleration(t[a:b], v[a:b], window_s)
+            return out
+    return _acceleration(t, v, window_s)
+
+
+def _acceleration(t: np.ndarray, v: np.ndarray, window_s: float) -> np.ndarray:
     from scipy.signal import savgol_filter
     if len(t) < 5:
         return np.zeros_like(v)
@@ -91,8 +113,15 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
                     joints: list[str] | None = None, name_map: dict[str, str] | None = None,
                     model=None, config: PipelineConfig = PipelineConfig(),
                     accelerations: list[JointSeries | None] | None = None,
-                    model_compensation: bool = False, progress=None) -> list[JointResult]:
-    """Identify ``joints`` (names after ``name_map``; None = every joint of the series).
+                    model_compensation: bool = False, progress=None,
+                    checks: list | None = None) -> list[JointResult]:
+    """Identify ``joints`` (names after ``name_map``; None = the model's joints when the
+    series has them and more, e.g. the six joints of /joint_states with 4-6 locked; else
+    every joint of the series).
+
+    Every series is checked for gaps and duplicates first (``config.gaps``): ``checks``, if
+    given, gets one gaps.SeriesCheck per series, and each joint's result carries a warning
+    per series with gaps (a result from data with gaps says so).
 
     Raises IdentificationError (one line) when names do not fit: the selection names a joint
     the data lack, the series disagree on their joints, or a ``total`` torque needs the
@@ -102,6 +131,9 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
         raise IdentificationError(f'method {config.method!r}: one of {", ".join(METHODS)}')
     name_map = dict(name_map or {})
     series_list = [rename(s, name_map) for s in series_list]
+    series_list, gap_notes = check_gaps(series_list, labels, config.gaps)
+    if checks is not None:
+        checks.extend(gap_notes)
     accelerations = [None if a is None else rename(a, name_map)
                      for a in (accelerations or [None] * len(series_list))]
     names = series_list[0].names
@@ -109,6 +141,8 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
         if set(s.names) != set(names):
             raise IdentificationError(f'{label} has joints {list(s.names)}, {labels[0]} has '
                                       f'{list(names)}: identify them separately')
+    if not joints and model is not None and set(model.joint_names) < set(names):
+        joints = list(model.joint_names)     # e.g. joint_1..joint_6 with 4-6 locked: 1-3
     joints = list(joints) if joints else list(names)
     missing = [j for j in joints if j not in names]
     if missing:
@@ -179,7 +213,30 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
                                        warnings=[f'{j}: method samples ({why})']))
             continue
         results.append(_sample_result(j, fit, v, f, config, why))
+    notes = [f'data with gaps: {c.summary()}' for c in gap_notes if not c.clean]
+    if notes:
+        results = [replace(r, warnings=list(r.warnings) + notes) for r in results]
     return results
+
+
+def _period(t: np.ndarray, gaps: GapConfig) -> float:
+    from .gaps import period_of
+    return period_of(t, gaps)[0]
+
+
+def check_gaps(series_list: list[JointSeries], labels: list[str], gaps: GapConfig,
+               topic: str = '/joint_states') -> tuple[list[JointSeries], list]:
+    """(series without duplicates, one gaps.SeriesCheck per series). GapError (one line:
+    bag, topic, gap) when gaps.on_gap is 'refuse' and a series has a gap (the methods here
+    use every stretch, however short: gaps.min_segment_s does not apply)."""
+    out, checks = [], []
+    gaps = replace(gaps, min_segment_s=0.0)
+    for s, label in zip(series_list, labels):
+        chk, keep, _ = check_series(s.t, label, topic, gaps)
+        checks.append(chk)
+        out.append(s if keep.all() else JointSeries(
+            s.t[keep], s.names, s.position[keep], s.velocity[keep], s.effort[keep]))
+    return out, checks
 
 
 def _moving_time(s: JointSeries, joint: str, v_min: float) -> float:
@@ -196,6 +253,10 @@ def _friction_torques(series_list, accelerations, model, config, progress) -> di
     out = {}
     idx_model = None
     for k, (s, acc) in enumerate(zip(series_list, accelerations)):
+        # q_dd never across a missing sample (bridging even 1-3 of them by interpolating
+        # the speed moved joint 3's samples fit from Coulomb 9.01 to 9.57 N m, see
+        # doc/readers.md)
+        split = replace(config.gaps, bridge_samples=0).split_s(_period(s.t, config.gaps))
         idx_model = [s.names.index(n) for n in model.joint_names]
         q, qd = s.position[:, idx_model], s.velocity[:, idx_model]
         if acc is not None:
@@ -203,12 +264,12 @@ def _friction_torques(series_list, accelerations, model, config, progress) -> di
             qdd = np.column_stack([np.interp(s.t, a.t, a.position[:, c])
                                    for c in range(len(s.names))])[:, idx_model]
             if not np.all(np.isfinite(qdd)):
-                qdd = acceleration(s.t, qd, config.accel_window_s)
+                qdd = acceleration(s.t, qd, config.accel_window_s, split)
         else:
-            qdd = acceleration(s.t, qd, config.accel_window_s)
+            qdd = acceleration(s.t, qd, config.accel_window_s, split)
         rows = np.any(np.abs(qd) >= config.samples.v_min, axis=1)
         if acc is None:
-            short = acceleration(s.t, qd, config.accel_check_window_s)
+            short = acceleration(s.t, qd, config.accel_check_window_s, split)
             steady = np.all(np.abs(short - qdd) <= config.accel_tolerance
                             + 0.1 * np.abs(qdd), axis=1)
         else:
@@ -324,5 +385,6 @@ def summary_line(r: JointResult) -> str:
     return text
 
 
-__all__ = ['PipelineConfig', 'identify_joints', 'report_entry', 'summary_line',
+__all__ = ['PipelineConfig', 'identify_joints', 'check_gaps', 'GapError', 'report_entry',
+           'summary_line',
            'IdentificationError', 'acceleration']

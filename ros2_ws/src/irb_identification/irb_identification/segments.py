@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .gaps import DEFAULT_SPLIT_S
 from .series import JointSeries
 
 
@@ -37,6 +38,10 @@ class SegmentConfig:
     sample); the torque is then referred to the position q - v effort_lag_s. At constant speed
     c this matters where gravity varies with position: a slope g' [N m/rad] would otherwise
     bias eq. 4.8 by g' c effort_lag_s (like extra viscous friction).
+    split_gap_s [s]: a step between samples at least this long (a gap of recorded data,
+    default gaps.GapConfig's: more than 3 samples missing at 4.032 ms) ends a hold; the
+    samples after it start a new one (no average across a gap; shorter gaps are bridged by
+    the time-weighted mean).
     """
 
     window_s: float = 0.1
@@ -51,6 +56,7 @@ class SegmentConfig:
     stick_fraction: float = 0.25
     stick_samples: int = 3
     effort_lag_s: float = 0.0
+    split_gap_s: float = DEFAULT_SPLIT_S
 
 
 @dataclass(frozen=True)
@@ -126,6 +132,17 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
+def split_runs(runs: list[tuple[int, int]], starts: np.ndarray) -> list[tuple[int, int]]:
+    """The [start, end) runs cut so that every index in ``starts`` (sorted: the first
+    sample after a gap) begins a run."""
+    out = []
+    for a, b in runs:
+        lo, hi = np.searchsorted(starts, [a + 1, b])
+        edges = [a] + [int(x) for x in starts[lo:hi]] + [b]
+        out.extend((x, y) for x, y in zip(edges[:-1], edges[1:]) if y > x)
+    return out
+
+
 def stick_slip(v: np.ndarray, config: SegmentConfig = SegmentConfig()) -> str | None:
     """Why the speeds v (k,) [rad/s] of one hold are not a steady constant speed (stick-slip
     signature, see SegmentConfig), or None if they are."""
@@ -169,7 +186,7 @@ def find_segments(series: JointSeries, joint: int, config: SegmentConfig = Segme
     ok &= np.concatenate([[True], np.sign(mean[1:]) == np.sign(mean[:-1])])
     others = [k for k in range(series.velocity.shape[1]) if k != joint]
     out = []
-    for a, b in _runs(ok):
+    for a, b in split_runs(_runs(ok), np.flatnonzero(np.diff(t) >= config.split_gap_s) + 1):
         dur = t[b - 1] - t[a]
         cut = config.trim_s + config.trim_fraction * dur
         # t is sorted: the trimmed hold by bisection (a mask over all of t per run made

@@ -133,11 +133,19 @@ def _stamp_ns(rows: np.ndarray) -> np.ndarray:
     return sec * 1_000_000_000 + nsec
 
 
-def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray) -> JointSeries:
+FIELDS = ('position', 'velocity', 'effort')
+
+
+def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
+                        require: tuple[str, ...] = FIELDS,
+                        unnamed: tuple[str, ...] | list[str] | None = None) -> JointSeries:
     """JointSeries from CDR payloads (N,) and their log times [ns] (N,).
 
-    Requires the same joint names in every message and position/velocity/effort of the
-    names' length; raises JointStateError otherwise (e.g. "no effort").
+    Requires the same joint names in every message and, for each field of ``require``, that
+    field with the names' length in at least one message; raises JointStateError otherwise
+    (e.g. "no effort"). Fields not required and not carried are NaN (a torque command is a
+    JointState with effort only: ``require=('effort',)``). ``unnamed``: joint names for
+    messages without names (pdplus's /torque_command: effort of joints 1-3 in order).
     """
     if not data:
         raise JointStateError('no JointState messages')
@@ -147,7 +155,12 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray) -> 
     names = first.names
     n = len(names)
     if n == 0:
-        raise JointStateError('JointState without joint names')
+        # pdplus's /torque_command carries effort only, without names: the joints in order
+        counts = [c for c in first.counts if c]
+        if not unnamed or not counts or counts[0] > len(unnamed):
+            raise JointStateError('JointState without joint names')
+        n = counts[0]
+    out_names = names if names else tuple(unnamed[:n])
     stamps = np.empty(len(data), np.int64)
     out = np.full((3, len(data), n), np.nan)
     for length in np.unique(lengths):
@@ -171,14 +184,14 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray) -> 
             for k, (off, cnt) in enumerate(zip(lay_i.offsets, lay_i.counts)):
                 if cnt == n:
                     out[k, i] = np.frombuffer(data[i], '<f8', n, off)
-    for k, field in enumerate(('position', 'velocity', 'effort')):
-        if np.all(np.isnan(out[k])):
+    for k, field in enumerate(FIELDS):
+        if field in require and np.all(np.isnan(out[k])):
             raise JointStateError(f'JointState messages carry no {field}')
     t = np.where(stamps > 0, stamps, log_t)
     if np.any(np.diff(t) < 0):
         order = np.argsort(t, kind='stable')
         t, out = t[order], out[:, order]
-    return JointSeries(t * 1e-9, names, out[0], out[1], out[2])
+    return JointSeries(t * 1e-9, out_names, out[0], out[1], out[2])
 
 
 def encode_joint_states(t_ns: np.ndarray, names: list[str], position: np.ndarray,

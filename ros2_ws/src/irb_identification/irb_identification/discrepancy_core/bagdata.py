@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bagio import BagError, BagWriter, TopicInfo, qos_profile_dict, read_messages
-from ..series import JOINT_STATE, decode_joint_states, encode_joint_states
+from ..bagio import BagError, BagWriter, TopicInfo, qos_profile_dict
+from ..gaps import GapConfig, SeriesCheck
+from ..series import JOINT_STATE, encode_joint_states
 
 POINT_STAMPED = 'geometry_msgs/msg/PointStamped'
 TOPIC_STATE = '/joint_states'
@@ -28,7 +29,8 @@ class RunData:
 
     t (N,) [s]; q (N, 3) [rad]; qd (N, 3) [rad/s]; effort (N, 3) [N m] (applied torque of
     the period ending at t); cmd_t (K,) [s], cmd (K, 3) [N m]; cam_t (M,) [s], cam_p (M, 3)
-    [m] in base_link; name: bag name; meta: the bag's custom data.
+    [m] in base_link; name: bag name; meta: the bag's custom data; filled (N,) bool or None:
+    samples interpolated into a short gap (run_pieces), not measured.
     """
 
     t: np.ndarray
@@ -41,6 +43,7 @@ class RunData:
     cam_p: np.ndarray
     name: str = ''
     meta: dict | None = None
+    filled: np.ndarray | None = None
 
 
 def _point_template(frame_id: str) -> tuple[bytes, int]:
@@ -112,35 +115,78 @@ def write_run(path: str | Path, joint_names: list[str], t: np.ndarray, q: np.nda
 
 
 def read_run(path: str | Path, joint_names: list[str]) -> RunData:
-    """RunData of a bag; BagError names a missing topic or a malformed message.
+    """RunData of a bag (or a main-job run bag with its ``_drive`` companion, see
+    readers.py); BagError names the bag, the topic and what is missing.
 
-    /joint_states is required; /torque_command and /camera/tcp may be missing (their
-    channels are then empty and the workflow skips them).
+    Measured q, qd and effort come from /joint_states (required, joints selected by name:
+    a six-joint message is fine); the commanded torque from /torque_command (effort only;
+    may be missing: the command channel is then empty); /camera/tcp may be missing.
     """
-    from ..bagio import bag_topics
-    from ..series import JointStateError
+    from ..readers import joint_series, read_topics
     path = Path(path)
-    present = bag_topics(path)
-    if TOPIC_STATE not in present:
-        raise BagError(f'bag {path}: no {TOPIC_STATE} (has {sorted(present)})')
-    wanted = [tp for tp in (TOPIC_STATE, TOPIC_COMMAND, TOPIC_CAMERA) if tp in present]
-    msgs = read_messages(path, wanted)
-    try:
-        js = decode_joint_states(msgs[TOPIC_STATE].data, msgs[TOPIC_STATE].t_ns).select(
-            joint_names)
-        if TOPIC_COMMAND in msgs and msgs[TOPIC_COMMAND].data:
-            cs = decode_joint_states(msgs[TOPIC_COMMAND].data, msgs[TOPIC_COMMAND].t_ns
-                                     ).select(joint_names)
-            cmd_t, cmd = cs.t, cs.effort
-        else:
-            cmd_t, cmd = np.empty(0), np.empty((0, 3))
-    except JointStateError as exc:
-        raise BagError(f'bag {path}: {exc}') from exc
+    msgs, src = read_topics(path, [TOPIC_STATE], optional=[TOPIC_COMMAND, TOPIC_CAMERA])
+    js = joint_series(msgs[TOPIC_STATE], src[TOPIC_STATE], joints=joint_names)
+    if TOPIC_COMMAND in msgs and msgs[TOPIC_COMMAND].data:
+        cs = joint_series(msgs[TOPIC_COMMAND], src[TOPIC_COMMAND], ('effort',), joint_names)
+        cmd_t, cmd = cs.t, cs.effort
+        ok = np.all(np.isfinite(cmd), axis=1)
+        cmd_t, cmd = cmd_t[ok], cmd[ok]
+    else:
+        cmd_t, cmd = np.empty(0), np.empty((0, 3))
     if TOPIC_CAMERA in msgs and msgs[TOPIC_CAMERA].data:
-        if present[TOPIC_CAMERA] != POINT_STAMPED:
-            raise BagError(f'bag {path}: {TOPIC_CAMERA} is {present[TOPIC_CAMERA]}')
+        if msgs[TOPIC_CAMERA].msgtype != POINT_STAMPED:
+            raise BagError(f'bag {src[TOPIC_CAMERA]}: {TOPIC_CAMERA} is '
+                           f'{msgs[TOPIC_CAMERA].msgtype}, not {POINT_STAMPED}')
         cam_t, cam_p = decode_points(msgs[TOPIC_CAMERA].data, msgs[TOPIC_CAMERA].t_ns)
     else:
         cam_t, cam_p = np.empty(0), np.empty((0, 3))
     return RunData(js.t, js.position, js.velocity, js.effort, cmd_t, cmd, cam_t, cam_p,
                    path.name)
+
+
+def run_pieces(run: RunData, gaps: GapConfig = GapConfig(), label: str | None = None
+               ) -> tuple[list[RunData], list[SeriesCheck]]:
+    """A run checked for gaps and duplicates (gaps.py) and cut into what can be analysed.
+
+    Joint states: duplicates dropped; the run is split at every gap longer than
+    ``gaps.split_s()`` into pieces of at least ``gaps.min_segment_s`` (each analysed as a run
+    of its own: no filter, derivative or spline crosses a gap); inside a piece the few
+    missing samples of short gaps are interpolated onto the even grid the residual filters
+    need. Commands and camera: duplicates dropped, their gaps reported; a piece keeps the
+    commands and camera samples of its own time span, and residuals.prepare_run does not
+    interpolate commands across a command gap. Returns (pieces, checks of the three
+    series; ``label`` names the bag in them). Raises gaps.GapError (one line) when
+    ``on_gap`` is 'refuse' and the joint states have a gap, or when no piece is long
+    enough.
+    """
+    from ..gaps import check_series, fill_grid
+    label = label or run.name or 'run'
+    chk, keep, segs = check_series(run.t, label, TOPIC_STATE, gaps)
+    checks = [chk]
+    t, q, qd, eff = run.t[keep], run.q[keep], run.qd[keep], run.effort[keep]
+    cmd_t, cmd = run.cmd_t, run.cmd
+    if len(cmd_t) > 1:
+        soft = GapConfig(**{**gaps.__dict__, 'on_gap': 'segment', 'min_segment_s': 0.0})
+        cchk, ckeep, _ = check_series(cmd_t, label, TOPIC_COMMAND, soft)
+        checks.append(cchk)
+        cmd_t, cmd = cmd_t[ckeep], cmd[ckeep]
+    cam_t, cam_p = run.cam_t, run.cam_p
+    if len(cam_t) > 2:
+        soft = GapConfig(**{**gaps.__dict__, 'on_gap': 'segment', 'min_segment_s': 0.0,
+                            'period_s': float(np.median(np.diff(cam_t)))})
+        kchk, kkeep, _ = check_series(cam_t, label, TOPIC_CAMERA, soft)
+        checks.append(kchk)
+        cam_t, cam_p = cam_t[kkeep], cam_p[kkeep]
+    if chk.clean and len(segs) == 1 and segs[0] == (0, len(t)):
+        return [RunData(t, q, qd, eff, cmd_t, cmd, cam_t, cam_p, run.name, run.meta)], checks
+    pieces = []
+    for i, (a, b) in enumerate(segs):
+        tn, arr, filled = fill_grid(t[a:b], {'q': q[a:b], 'qd': qd[a:b], 'effort': eff[a:b]},
+                                    chk.period_s, smooth=('q',))
+        lo, hi = tn[0], tn[-1]
+        c = (cmd_t >= lo - 0.1) & (cmd_t <= hi)
+        k = (cam_t >= lo) & (cam_t <= hi)
+        name = f'{run.name}[{i + 1}/{len(segs)}]' if len(segs) > 1 else run.name
+        pieces.append(RunData(tn, arr['q'], arr['qd'], arr['effort'], cmd_t[c], cmd[c],
+                              cam_t[k], cam_p[k], name, dict(run.meta or {}), filled))
+    return pieces, checks

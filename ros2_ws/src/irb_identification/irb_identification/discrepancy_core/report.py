@@ -124,6 +124,25 @@ def _fmt(x):
     return float(f'{x:.4g}')
 
 
+def data_line(report: dict) -> str:
+    """One sentence on the data the answer comes from: complete, or with gaps (how many
+    samples missing, in how many pieces it was analysed)."""
+    q = report.get('data_quality')
+    if not q:
+        return 'Data: not checked for gaps.'
+    if q['complete']:
+        return (f"Data: complete ({q['runs']} run(s), no gap and no duplicate in joint states, "
+                'commands and camera).')
+    s = 'Data WITH GAPS: '
+    if q['joint_states_complete']:
+        s += 'joint states complete; '
+    else:
+        s += (f"{q['missing_joint_states']} joint states missing; {q['runs']} run(s) analysed "
+              f"as {q['pieces_analysed']} piece(s) split at the long gaps, short gaps "
+              'interpolated; ')
+    return s + f"{len(q['notes'])} series with gaps or duplicates (listed below)."
+
+
 def answer_line(report: dict) -> str:
     """One sentence whose words match the confidence."""
     c = report['confidence']
@@ -167,7 +186,11 @@ def answer_line(report: dict) -> str:
 def markdown(report: dict, files: list[str]) -> str:
     lines = ['# Model-discrepancy report', '',
              f"**Answer: `{report['effect']}`**, confidence {report['confidence']:.2f} "
-             '(block bootstrap of each selection step).', '', answer_line(report), '']
+             '(block bootstrap of each selection step).', '', answer_line(report), '',
+             data_line(report), '']
+    lines += [f'- {n}' for n in (report.get('data_quality') or {}).get('notes', [])]
+    if lines[-1] != '':
+        lines.append('')
     for n in report['effects']:
         lines += [f"## {n['order']}. `{n['effect']}` ({n['kind']}"
                   + (', refit of an effect already in the model' if n['refit_of_known']

@@ -28,9 +28,10 @@ from .bagdata import RunData
 @dataclass(frozen=True)
 class ResidualConfig:
     """window_s [s] SG window (upper bound), sg_order, v_min [rad/s], command_lag_samples,
-    period_s [s], edge_s [s]; the window adapts to the excitation: at most
-    ``window_per_reversal`` times the median time between velocity reversals of the run, at
-    least ``min_window_s`` (see ``smoothing_window``)."""
+    period_s [s], edge_s [s], gap_factor [-] (a command step longer than this x period is a
+    gap the command channel does not interpolate across); the window adapts to the
+    excitation: at most ``window_per_reversal`` times the median time between velocity
+    reversals of the run, at least ``min_window_s`` (see ``smoothing_window``)."""
 
     window_s: float = 0.1
     sg_order: int = 3
@@ -40,6 +41,7 @@ class ResidualConfig:
     command_lag_samples: int = 4
     period_s: float = 0.004032
     edge_s: float = 0.1
+    gap_factor: float = 1.5
 
 
 @dataclass
@@ -103,9 +105,33 @@ def smoothing_window(t: np.ndarray, qd_raw: np.ndarray, config: 'ResidualConfig'
     return w, rev
 
 
+def across_gap(x: np.ndarray, t: np.ndarray, max_step_s: float, margin_s: float = 0.0
+               ) -> np.ndarray:
+    """(K,) True where interpolating the series at t (M,) anywhere in [x - margin_s, x]
+    would bridge a step longer than ``max_step_s`` (a gap: missing commands)."""
+    x = np.asarray(x, float)
+    bad = np.zeros(len(x), bool)
+    if len(t) < 2:
+        return bad
+    idx = np.flatnonzero(np.diff(t) > max_step_s)
+    if not len(idx):
+        return bad
+    lo = np.searchsorted(x, t[idx], 'right')                 # x > gap start
+    hi = np.searchsorted(x, t[idx + 1] + margin_s, 'left')   # x - margin < gap end
+    mark = np.zeros(len(x) + 1, int)
+    np.add.at(mark, lo, 1)
+    np.add.at(mark, hi, -1)
+    return np.cumsum(mark)[:-1] > 0
+
+
 def prepare_run(run: RunData, model, friction, config: ResidualConfig = ResidualConfig(),
-                t_origin: float = 0.0) -> Channels:
-    """Channels of one run for the nominal ``model`` (RobotModel) and ``friction`` map."""
+                t_origin: float = 0.0, cmd_margin_s: float = 0.0202) -> Channels:
+    """Channels of one run for the nominal ``model`` (RobotModel) and ``friction`` map.
+
+    The joint states must have no gap (bagdata.run_pieces cuts runs at gaps and fills the
+    few missing samples of short ones); the command channel leaves out every sample whose
+    lagged command (and the delay grid's ``cmd_margin_s`` before it) falls in a command gap
+    (a step longer than ``gap_factor`` x period)."""
     c = config
     T = float(np.median(np.diff(run.t))) if len(run.t) > 1 else c.period_s
     n = len(run.t)
@@ -155,7 +181,8 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
     near_stop = np.stack([np.convolve(bad[:, j].astype(float), k, 'same') > 0
                           for j in range(3)], axis=1)
     edge = (run.t - run.t[0] < c.edge_s) | (run.t[-1] - run.t < c.edge_s)
-    moving = slide & ~near_stop & ~edge[:, None]
+    filled = np.zeros(n, bool) if run.filled is None else np.asarray(run.filled, bool)
+    moving = slide & ~near_stop & ~edge[:, None] & ~filled[:, None]
     bias_ss = np.array([float(np.sum(bias[moving[:, j], j] ** 2)) for j in range(3)])
     # camera channel
     inside = (run.cam_t >= run.t[0] + c.edge_s) & (run.cam_t <= run.t[-1] - c.edge_s)
@@ -171,7 +198,9 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
     if len(run.cmd_t) > 1:
         lagged = run.t - c.command_lag_samples * T
         ok = ((lagged >= run.cmd_t[0]) & (lagged <= run.cmd_t[-1])
-              & np.any(run.effort != 0.0, axis=1))
+              & np.any(run.effort != 0.0, axis=1)
+              & ~across_gap(lagged, run.cmd_t, c.gap_factor * T, cmd_margin_s)
+              & ~filled)
         eff_t, eff = run.t[ok], run.effort[ok]
         pred = np.stack([np.interp(eff_t - c.command_lag_samples * T, run.cmd_t,
                                    run.cmd[:, j]) for j in range(3)], axis=1)

@@ -33,7 +33,8 @@ from irb_control.plant_effects import (EFFECT_NAMES, PlantEffects, effect_to_dic
                                        load_plant_effects, save_effects)
 from irb_description.friction import load_friction_map
 
-from .bagdata import read_run
+from ..gaps import GapConfig
+from .bagdata import read_run, run_pieces
 from .forward import Decision, final_fit, forward_select
 from .library import INERTIAL_LINKS, TCP, TORQUE, Grids, contribution, pool, to_block
 from .residuals import ResidualConfig, prepare_run
@@ -61,6 +62,7 @@ class WorkflowConfig:
     unexplained_ratio: float = 3.0
     noise_floor: dict = field(default_factory=lambda: {
         'torque_nm': [0.25, 0.25, 0.15], 'tcp_m': 4.0e-5, 'command_nm': [1e-3, 1e-3, 1e-3]})
+    gaps: GapConfig = field(default_factory=GapConfig)
 
     @classmethod
     def from_yaml(cls, path: str | Path | None) -> 'WorkflowConfig':
@@ -78,6 +80,8 @@ class WorkflowConfig:
         kw = {k: d[k] for k in keys if k in d}
         if 'speed_bins' in d:
             kw['speed_bins'] = tuple(d['speed_bins'])
+        if 'gaps' in d:
+            kw['gaps'] = GapConfig(**d['gaps'])
         return cls(res, grids, **kw)
 
 
@@ -345,6 +349,18 @@ def _cb_name(cb) -> str:
     return f'{cb[0]}_joint_{cb[1] + 1}' if cb[1] is not None else cb[0]
 
 
+def data_quality(checks, n_runs: int, n_pieces: int) -> dict:
+    """The report's ``data_quality``: complete or not, one entry per checked series, and one
+    note per series with gaps or duplicates (what the CLI prints and report.md lists)."""
+    joint = [c for c in checks if c.topic == '/joint_states']
+    notes = [c.summary() for c in checks if not c.clean]
+    return {'complete': all(c.clean for c in checks),
+            'joint_states_complete': all(c.clean for c in joint),
+            'runs': n_runs, 'pieces_analysed': n_pieces,
+            'missing_joint_states': int(sum(c.missing for c in joint)),
+            'series': [c.as_dict() for c in checks], 'notes': notes}
+
+
 def verdict(named: list[dict], last, residual_above_floor: bool,
             n_boot: int) -> tuple[str, float, dict | None]:
     """The answer from the named effects and the last selection step: the names joined
@@ -384,10 +400,25 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
     if not isinstance(known_errors, dict) or set(known_errors) - set(MODEL_ERRORS):
         raise ValueError(f'{model_path}: model_errors must map names of {MODEL_ERRORS}')
     all_bags = list(bags) + list(holdout_bags)
+    labels = list(all_bags) if runs is None else [r.name for r in runs]
     if runs is None:
         runs = [read_run(b, model.joint_names) for b in all_bags]
+    # gaps and duplicates: each run cut at gaps into pieces analysed as runs of their own
+    pieces, checks, n_fit_pieces = [], [], 0
+    for i, (r, label) in enumerate(zip(runs, labels)):
+        ps, cs = run_pieces(r, config.gaps, str(label))
+        pieces += ps
+        checks += cs
+        if i < len(bags):
+            n_fit_pieces += len(ps)
+    quality = data_quality(checks, len(runs), len(pieces))
+    if log:
+        for line in quality['notes']:
+            log(line)
+    runs = pieces
     t_origin = min(r.t[0] for r in runs)
-    channels = [prepare_run(r, model, fm, config.residual, t_origin) for r in runs]
+    channels = [prepare_run(r, model, fm, config.residual, t_origin,
+                            config.grids.delay_max_s) for r in runs]
     P = pool(channels, model, fm, config.block_s, config.grids, config.residual)
     P.noise['effort_raw_nm'] = np.sqrt(np.mean([np.square(c.extra['effort_noise_raw_nm'])
                                                 for c in channels], axis=0))
@@ -415,7 +446,7 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
                 B.y[cb] = B.y[cb] - X @ vals
     blocks = np.unique(np.concatenate([P.block, P.cam_block, P.cmd_block]))
     if holdout_bags:
-        fit_blocks = blocks[blocks // 10000 < len(bags)]
+        fit_blocks = blocks[blocks // 10000 < n_fit_pieces]
     else:
         fit_blocks = blocks[(blocks % 10000) % 2 == 0]
     hold_blocks = np.setdiff1d(blocks, fit_blocks)
@@ -476,6 +507,7 @@ def run_workflow(bags, model_path, config: WorkflowConfig = WorkflowConfig(),
     report = _report(config, B, P, fr, known, fm, model_yaml, model_path, bags, holdout_bags,
                      fit_blocks, hold_blocks, channels)
     report['partial_fits'] = partial
+    report['data_quality'] = quality
     effects, friction_yaml, errors = _updated_model(fr, known, model_yaml, known_errors)
     res = WorkflowResult(report, channels, P, None, None, fr,
                          {'friction_yaml': friction_yaml, 'effects': PlantEffects(effects),
