@@ -26,6 +26,7 @@ setup(
             'model_check = irb_description.model_check:main',
             'generate_urdf = irb_description.generate_urdf:main',
             'kinematics_server = irb_description.kinematics_server:main',
+            'state_publisher = irb_description.state_publisher:main',
         ],
     },
 )
