@@ -213,8 +213,10 @@ class Trace:
             self._last_sample = self._last_publish = -math.inf
         return t - self._last_sample >= self.sample_period_s
 
-    def add(self, t: float, p) -> None:
-        self.points.append((float(p[0]), float(p[1]), float(p[2])))
+    def add(self, t: float, point) -> None:
+        """Keep ``point`` (any object: the node stores ready-made message points, so that a
+        publication only lists them) as the point at stamp ``t``."""
+        self.points.append(point)
         self._last_sample = t
 
     def due(self, t: float) -> bool:

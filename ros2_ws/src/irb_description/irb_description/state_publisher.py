@@ -83,7 +83,8 @@ def _make_node_class():
         m.pose.orientation.w = 1.0
         m.scale.x = width
         m.color = ColorRGBA(r=color[0], g=color[1], b=color[2], a=color[3])
-        m.points = [Point(x=p[0], y=p[1], z=p[2]) for p in points]
+        m.points = [p if isinstance(p, Point) else Point(x=float(p[0]), y=float(p[1]),
+                                                          z=float(p[2])) for p in points]
         m.frame_locked = False
         return m
 
@@ -143,8 +144,8 @@ def _make_node_class():
             t = stamp.sec + stamp.nanosec * 1e-9
             tr = self.trace
             if tr.wants(t):
-                tr.add(t, self.tree.pose(q, self.p['root_frame'],
-                                         self.p['tcp_frame'])[:3, 3])
+                x, y, z = self.tree.pose(q, self.p['root_frame'], self.p['tcp_frame'])[:3, 3]
+                tr.add(t, Point(x=float(x), y=float(y), z=float(z)))
             if tr.due(t) and len(tr.points) >= 2:
                 self.pub_trace.publish(MarkerArray(markers=[line_marker(
                     'tcp_trace', self.p['root_frame'], stamp, tr.points,
