@@ -7,9 +7,11 @@
    ``robot_state.TfTree.transforms`` (own URDF-tree code) against pinocchio
    (``forwardKinematics`` on the six-joint model, then each joint's ``liMi`` placement as a
    quaternion), both checked equal first.
-2. The node's whole callback (``on_state``: positions by name, transforms, the TFMessage
-   objects, trace bookkeeping) in-process with the publishers replaced by no-ops, so the
-   figure is Python work, not DDS.
+2. The node's whole callback on serialized joint states (``on_state_raw``: CDR read,
+   positions by name, transforms, CDR TFMessage, trace bookkeeping), and for comparison the
+   same work through rclpy's message objects (deserialize the JointState, build and serialize
+   a TFMessage of six TransformStamped), in-process with the publishers replaced by no-ops,
+   so the figures are Python work, not DDS.
 Median, 90th percentile and max [us] over 5 repeats of 2000 random states; writes
 results/state_publisher.json.
 """
@@ -74,7 +76,7 @@ def main():
         pin_t += time_each(lambda q: pinocchio_transforms(model, data, q), qs)
     out['transforms_own'] = stats(own_t)
     out['transforms_pinocchio'] = stats(pin_t)
-    out['callback'] = callback_cost(qs)
+    out['callback_raw'], out['callback_objects'] = callback_cost(qs)
     out['load_average_after'] = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / 'state_publisher.json').write_text(json.dumps(out, indent=2) + '\n')
@@ -83,6 +85,7 @@ def main():
 
 def callback_cost(qs):
     import rclpy
+    from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import JointState
 
     from irb_description.state_publisher import make_node
@@ -103,13 +106,31 @@ def callback_cost(qs):
                            effort=[0.0] * 6)
             m.header.stamp.sec, m.header.stamp.nanosec = divmod(k * 4_032_000, 10**9)
             msgs.append(m)
+        raw = [serialize_message(m) for m in msgs]
         t = []
         for _ in range(REPEATS):
-            node.trace.points.clear()
-            node.trace.wants(-1.0)
-            t += time_each(node.on_state, msgs)
+            t += time_each(node.on_state_raw, raw)
+        from geometry_msgs.msg import TransformStamped
+        from tf2_msgs.msg import TFMessage
+
+        def objects(data):
+            m = deserialize_message(data, JointState)
+            q, _ = node.tree.positions(m.name, m.position)
+            out = TFMessage()
+            for parent, child, tr, ro in node.tree.transforms(q):
+                x = TransformStamped()
+                x.header.stamp = m.header.stamp
+                x.header.frame_id, x.child_frame_id = parent, child
+                v, r = x.transform.translation, x.transform.rotation
+                v.x, v.y, v.z = tr
+                r.x, r.y, r.z, r.w = ro
+                out.transforms.append(x)
+            serialize_message(out)
+        t_obj = []
+        for _ in range(REPEATS):
+            t_obj += time_each(objects, raw)
         node.destroy_node()
-        return stats(t)
+        return stats(t), stats(t_obj)
     finally:
         rclpy.try_shutdown(context=ctx)
 

@@ -53,6 +53,7 @@ TRACE_COLOR = (1.0, 0.2, 0.2, 1.0)
 
 
 def _make_node_class():
+    from builtin_interfaces.msg import Time
     from geometry_msgs.msg import Point, TransformStamped
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -64,7 +65,7 @@ def _make_node_class():
 
     from .node_main import declare_params, latched_qos, state_pub_qos
     from .params import urdf_path
-    from .robot_state import TfTree, Trace
+    from .robot_state import JointStateReader, TfEncoder, TfTree, Trace
 
     def transform_msg(stamp, parent, child, t, q) -> TransformStamped:
         m = TransformStamped()
@@ -115,8 +116,11 @@ def _make_node_class():
                                                        10)
                 self.create_subscription(JointTrajectory, 'planned_trajectory', self.on_plan,
                                          latched_qos())
-            self.create_subscription(JointState, 'joint_states', self.on_state,
-                                     state_pub_qos())
+            # the 248 Hz path on serialized messages (robot_state.JointStateReader, TfEncoder)
+            self._reader = JointStateReader()
+            self._encoder = TfEncoder([(j.parent, j.child) for j in self.tree.movable])
+            self.create_subscription(JointState, 'joint_states', self.on_state_raw,
+                                     state_pub_qos(), raw=True)
             now = self.get_clock().now().to_msg()
             self.pub_static.publish(TFMessage(transforms=[
                 transform_msg(now, *x) for x in self.tree.static_transforms()]))
@@ -128,28 +132,51 @@ def _make_node_class():
                 f'state_publisher: {len(self.tree.movable)} joints {self.tree.names}, '
                 f'{len(self.tree.fixed)} fixed, URDF {path}')
 
-        def on_state(self, msg: JointState) -> None:
-            q, missing = self.tree.positions(msg.name, msg.position)
-            if q is None:
-                self.skipped += 1
-                self.get_logger().warn(f'joint_states without {", ".join(missing)}: no /tf '
-                                       f'({self.skipped} skipped)', throttle_duration_sec=5.0)
+        def on_state_raw(self, data: bytes) -> None:
+            try:
+                sec, nanosec, names, position = self._reader.read(data)
+            except ValueError as exc:
+                self._skip(str(exc))
                 return
-            stamp = msg.header.stamp
-            self.pub_tf.publish(TFMessage(transforms=[
-                transform_msg(stamp, *x) for x in self.tree.transforms(q)]))
+            self._state(sec, nanosec, names, position)
+
+        def on_state(self, msg: JointState) -> None:
+            """The same for a message object."""
+            self._state(msg.header.stamp.sec, msg.header.stamp.nanosec, tuple(msg.name),
+                        msg.position)
+
+        def _skip(self, why: str) -> None:
+            self.skipped += 1
+            self.get_logger().warn(f'{why}: no /tf ({self.skipped} joint states skipped)',
+                                   throttle_duration_sec=5.0)
+
+        def _state(self, sec: int, nanosec: int, names: tuple, position) -> None:
+            if names is not self._names:
+                self._names = names
+                self._index = self.tree.index(names)
+            q, missing = self.tree.positions_at(self._index, position)
+            if q is None:
+                self._skip(f'joint_states without {", ".join(missing)}')
+                return
+            self.pub_tf.publish(self._encoder.encode(sec, nanosec, self.tree.transforms(q)))
             self.published += 1
             if self.pub_trace is None:
                 return
-            t = stamp.sec + stamp.nanosec * 1e-9
+            t = sec + nanosec * 1e-9
             tr = self.trace
             if tr.wants(t):
                 x, y, z = self.tree.pose(q, self.p['root_frame'], self.p['tcp_frame'])[:3, 3]
                 tr.add(t, Point(x=float(x), y=float(y), z=float(z)))
             if tr.due(t) and len(tr.points) >= 2:
+                stamp = Time(sec=sec, nanosec=nanosec)
                 self.pub_trace.publish(MarkerArray(markers=[line_marker(
                     'tcp_trace', self.p['root_frame'], stamp, tr.points,
                     self.p['trace_line_width_m'], TRACE_COLOR)]))
+
+        def destroy_node(self):
+            self.get_logger().info(f'state_publisher: {self.published} /tf published, '
+                                   f'{self.skipped} joint states skipped')
+            return super().destroy_node()
 
         def on_plan(self, msg: JointTrajectory) -> None:
             pts = []

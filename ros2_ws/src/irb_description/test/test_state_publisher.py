@@ -74,6 +74,37 @@ rclpy = pytest.importorskip('rclpy')
 
 
 @pytest.mark.ros
+@pytest.mark.parametrize('names', [SIX, ['joint_1', 'j2', 'joint_3xx'], ['a'], []])
+@pytest.mark.parametrize('frame_id', ['', 'abc', 'abcde'])
+def test_serialized_joint_state_and_tf_agree_with_rclpy(names, frame_id):
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import JointState
+    from tf2_msgs.msg import TFMessage
+
+    from irb_description.robot_state import JointStateReader, TfEncoder
+    js = JointState(name=names, position=[0.1 * k - 0.2 for k in range(len(names))],
+                    velocity=[1.0] * len(names))
+    js.header.stamp.sec, js.header.stamp.nanosec, js.header.frame_id = 5, 7, frame_id
+    data = serialize_message(js)
+    reader = JointStateReader()
+    assert reader.read(data) == (5, 7, tuple(names), tuple(js.position))
+    assert reader.read(data)[2] is reader.read(data)[2]       # names kept while unchanged
+    for bad in (data[:len(data) // 2], b'\x00\x02\x00\x00' + data[4:]):
+        with pytest.raises(ValueError):
+            reader.read(bad)
+    tree = TfTree(urdf_path().read_text())
+    tr = tree.transforms([0.1, -0.2, 0.3, 0.4, -0.5, 0.6])
+    msg = deserialize_message(TfEncoder([(p, c) for p, c, _, _ in tr]).encode(9, 11, tr),
+                              TFMessage)
+    assert [(m.header.frame_id, m.child_frame_id) for m in msg.transforms] == [
+        (p, c) for p, c, _, _ in tr]
+    for m, (_, _, t, q) in zip(msg.transforms, tr):
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (9, 11)
+        v, r = m.transform.translation, m.transform.rotation
+        assert (v.x, v.y, v.z) == t and (r.x, r.y, r.z, r.w) == q
+
+
+@pytest.mark.ros
 def test_recorded_tf_resolves_base_to_tool0_at_every_joint_state(tmp_path, rng):
     from mcap.reader import make_reader
     from mcap.writer import Writer
