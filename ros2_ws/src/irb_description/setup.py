@@ -11,7 +11,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml', 'README.md']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
         ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
     ],
     install_requires=['setuptools'],
@@ -26,6 +26,7 @@ setup(
             'model_check = irb_description.model_check:main',
             'generate_urdf = irb_description.generate_urdf:main',
             'kinematics_server = irb_description.kinematics_server:main',
+            'state_publisher = irb_description.state_publisher:main',
         ],
     },
 )

@@ -18,6 +18,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
 from irb_description.node_main import declare, latched_qos, run_node, state_pub_qos, state_qos
+from irb_description.robot_state import six_joint_names, six_joints
 from irb_interfaces.msg import AxisStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -106,10 +107,9 @@ class AxisBridge(Node):
                 msg = JointState()
                 msg.header.stamp = Time(sec=stamp_ns // 1_000_000_000,
                                         nanosec=stamp_ns % 1_000_000_000)
-                msg.name = self.joint_names
-                msg.position = state.q[:3].tolist()
-                msg.velocity = state.qd[:3].tolist()
-                msg.effort = state.tau[:3].tolist()
+                # all six joints, as the axis computer reports them
+                msg.name = list(six_joint_names())
+                msg.position, msg.velocity, msg.effort = six_joints(state.q, state.qd, state.tau)
                 self.pub_state.publish(msg)
 
     def _axis_status(self, state, force: bool = False) -> None:

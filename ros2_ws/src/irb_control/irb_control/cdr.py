@@ -195,6 +195,42 @@ class JointStateDecoder:
         return sec, nanosec, self._names, seqs[0], seqs[1], seqs[2]
 
 
+class JointSelector:
+    """Joints picked by name from a decoded JointState (``/joint_states`` names all six joints,
+    the loop needs joints 1-3). ``select(names, seq)`` -> the values of ``joints`` in ``seq``;
+    the index lookup is cached while the names repeat (the decoder returns the same names
+    object then). A message without names is read by position (the first ``len(joints)``).
+    ValueError naming the missing joints, or a sequence shorter than its names."""
+
+    def __init__(self, joints):
+        self.joints = tuple(joints)
+        self._names: tuple | None = None
+        self._idx: tuple | None = None
+        self._missing = ''
+
+    def indices(self, names: tuple) -> tuple:
+        if names is not self._names and names != self._names:
+            self._names = names
+            if not names:
+                self._idx, self._missing = tuple(range(len(self.joints))), ''
+            else:
+                missing = [j for j in self.joints if j not in names]
+                self._idx = None if missing else tuple(names.index(j) for j in self.joints)
+                self._missing = (f'joint_states without {", ".join(missing)} (it names '
+                                 f'{", ".join(names)})' if missing else '')
+        if self._idx is None:
+            raise ValueError(self._missing)
+        return self._idx
+
+    def select(self, names: tuple, seq) -> tuple:
+        idx = self.indices(names)
+        try:
+            return tuple(seq[i] for i in idx)
+        except IndexError:
+            raise ValueError(f'joint_states with {len(seq)} values for '
+                             f'{len(names) or len(self.joints)} joints') from None
+
+
 class ControllerStateEncoder:
     """irb_interfaces/ControllerState: ``encode(sec, nanosec, mode, stop_reason, theta,
     theta_predicted, theta_dot_ref, arrays, missed_deadlines, rejected_inputs,

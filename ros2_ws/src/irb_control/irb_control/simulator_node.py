@@ -22,6 +22,7 @@ from irb_description.electrical import BUS_MODES, load_electrical
 from irb_description.model import RobotModel
 from irb_description.node_main import (declare, latched_qos, run_node, running, state_pub_qos,
                                        state_qos)
+from irb_description.robot_state import six_joint_names, six_joints
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -130,7 +131,8 @@ class SimulatorNode(Node):
         self._status_key = None
         self._status_due = 0.0
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
-        self._state_enc = JointStateEncoder(self.joint_names, 3, 3, 3)
+        # /joint_states names all six joints, 4-6 at their locked values (irb_description)
+        self._state_enc = JointStateEncoder(six_joint_names(), 6, 6, 6)
         self._decoder = JointStateDecoder()
         self._effort_names: tuple | None = None  # names of the last command ...
         self._effort_idx: list | None = None     # ... and the indices of joints 1-3 in it
@@ -223,7 +225,7 @@ class SimulatorNode(Node):
     def _publish_state(self, stamp: Time) -> None:
         y = self.plant.measure()
         sec, nanosec = stamp.sec, stamp.nanosec
-        data = self._state_enc.encode(sec, nanosec, y.q.tolist(), y.qd.tolist(), y.tau.tolist())
+        data = self._state_enc.encode(sec, nanosec, *six_joints(y.q, y.qd, y.tau))
         key = sec * 1_000_000_000 + nanosec
         self._sent = {key: time.monotonic()}      # only the latest state can be answered
         self.pub_state.publish(data)

@@ -40,9 +40,11 @@ def test_state_bytes_and_commands_by_name(sim):
     sim._publish_state(stamp)
     m = deserialize_message(sim.pub_state.sent[-1], JointState)
     y = measured[-1]
-    assert m.header.stamp == stamp and list(m.name) == ['joint_1', 'joint_2', 'joint_3']
-    assert m.position.tolist() == y.q.tolist() and m.velocity.tolist() == y.qd.tolist()
-    assert m.effort.tolist() == y.tau.tolist()
+    assert m.header.stamp == stamp and list(m.name) == [f'joint_{i}' for i in range(1, 7)]
+    # joints 1-3 as measured, the locked joints 4-6 at 0 with no speed and no torque
+    assert m.position.tolist() == y.q.tolist() + [0.0] * 3
+    assert m.velocity.tolist() == y.qd.tolist() + [0.0] * 3
+    assert m.effort.tolist() == y.tau.tolist() + [0.0] * 3
 
     applied = []
     sim.plant.command = lambda tau: applied.append(np.asarray(tau).tolist())

@@ -105,7 +105,7 @@ def test_simulator_joint_states_reach_default_and_best_effort_subscribers(graph)
     assert not default.incompatible.done() and not loop.incompatible.done()
     for r in (default, loop):        # the simulator's own message, decoded by rclpy
         m = r.first.result()
-        assert list(m.name) == ['joint_1', 'joint_2', 'joint_3'] and len(m.position) == 3
+        assert list(m.name) == [f'joint_{i}' for i in range(1, 7)] and len(m.position) == 6
         assert m.header.stamp.sec >= 100
 
 

@@ -14,7 +14,12 @@ from .urdf_gen import generate_urdf
 
 
 def main(args=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog='ros2 run irb_description generate_urdf',
+        description='Write urdf/irb1600_6_12.urdf of the description package from '
+        'config/kinematics.yaml and config/dynamics.yaml; --check only compares and exits 1 '
+        'when the file is out of date.',
+        epilog='example: ros2 run irb_description generate_urdf --check')
     parser.add_argument('--output', type=Path, default=None, help='URDF path to write')
     parser.add_argument('--check', action='store_true', help='compare only, exit 1 if stale')
     ns = parser.parse_args(args)

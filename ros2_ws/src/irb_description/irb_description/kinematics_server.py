@@ -11,7 +11,19 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectoryPoint
 
 from .model import RobotModel, UnreachableError
-from .node_main import run_node, spin_until_signal
+from .node_help import NodeSpec, Param, Topic
+from .node_main import declare_params, run_node, spin_until_signal
+
+SPEC = NodeSpec(
+    'kinematics_server', 'irb_description',
+    'Serves the closed-form inverse kinematics of the simplified model (thesis section 3.2): '
+    'TCP points in base_link -> joint angles of joints 1-3, with per-point reachability.',
+    params=(Param('branch', 'elbow_up', '', "IK elbow branch: 'elbow_up' (the thesis's) or "
+                  "'elbow_down'"),),
+    services=(Topic('solve_ik', 'irb_interfaces/srv/SolveIk', 'TCP points (base_link, m) -> '
+                    'joint angles (rad), per-point reachability'),),
+    example='ros2 run irb_description kinematics_server --ros-args -p branch:=elbow_up',
+)
 
 
 class KinematicsServer(Node):
@@ -19,8 +31,7 @@ class KinematicsServer(Node):
 
     def __init__(self):
         super().__init__('kinematics_server')
-        self.declare_parameter('branch', 'elbow_up', _descriptor(
-            "IK elbow branch: 'elbow_up' (thesis) or 'elbow_down'"))
+        declare_params(self, SPEC.params)
         self.model = RobotModel.load()
         self.srv = self.create_service(SolveIk, 'solve_ik', self.on_request)
         self.get_logger().info(f'serving solve_ik for {self.model.joint_names}')
@@ -45,11 +56,6 @@ class KinematicsServer(Node):
         return response
 
 
-def _descriptor(text: str):
-    from rcl_interfaces.msg import ParameterDescriptor
-    return ParameterDescriptor(description=text)
-
-
 def _spin(node: KinematicsServer) -> None:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
@@ -57,7 +63,7 @@ def _spin(node: KinematicsServer) -> None:
 
 
 def main(args=None):
-    run_node(KinematicsServer, _spin, args)
+    run_node(KinematicsServer, _spin, args, spec=SPEC)
 
 
 if __name__ == '__main__':

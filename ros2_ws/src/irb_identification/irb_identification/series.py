@@ -191,7 +191,31 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
     if np.any(np.diff(t) < 0):
         order = np.argsort(t, kind='stable')
         t, out = t[order], out[:, order]
-    return JointSeries(t * 1e-9, out_names, out[0], out[1], out[2])
+    return without_locked(JointSeries(t * 1e-9, out_names, out[0], out[1], out[2]))
+
+
+LOCKED_STILL_RAD = 1e-3     # a locked joint whose position spans less than this stood still
+
+
+def without_locked(s: JointSeries) -> JointSeries:
+    """The series without the joints the model locks (irb_description: joint_4 .. joint_6;
+    /joint_states names all six joints, the model and the identification use joints 1-3)
+    where such a joint stood still (position span < ``LOCKED_STILL_RAD``, or no position).
+    A locked joint that moved stays in the series: it is data the readers must see."""
+    from irb_description.robot_state import locked_joint_names
+    locked = set(locked_joint_names())
+    keep = []
+    for i, name in enumerate(s.names):
+        if name in locked:
+            pos = s.position[:, i]
+            pos = pos[np.isfinite(pos)]
+            if not len(pos) or float(pos.max() - pos.min()) < LOCKED_STILL_RAD:
+                continue
+        keep.append(i)
+    if len(keep) == len(s.names) or not keep:
+        return s
+    return JointSeries(s.t, tuple(s.names[i] for i in keep), s.position[:, keep],
+                       s.velocity[:, keep], s.effort[:, keep])
 
 
 def encode_joint_states(t_ns: np.ndarray, names: list[str], position: np.ndarray,
