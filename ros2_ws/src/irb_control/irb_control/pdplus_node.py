@@ -13,6 +13,7 @@ answered.
 """
 from __future__ import annotations
 
+import gc
 import math
 import sys
 import threading
@@ -241,7 +242,7 @@ class PdPlusNode(Node):
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
         # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
         stamp = sec + nanosec * 1e-9
-        age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+        age = self._clock_s() - stamp
         if not -self._future_s <= age <= self.watchdog.timeout_s:
             # too old to answer (it waited somewhere longer than the watchdog limit) or from
             # the future: never answered, never counted as a deadline, the watchdog not fed
@@ -283,6 +284,11 @@ class PdPlusNode(Node):
              out.q_error.tolist(), out.qd_error.tolist(), out.tau_model.tolist(),
              out.tau_friction.tolist(), out.tau_feedback.tolist(), out.tau.tolist()),
             self.missed, self.ctrl.rejected_inputs + self.rejected_stale, dt))
+
+    def _clock_s(self) -> float:
+        """The node's clock [s] (ROS time: system, or /clock with use_sim_time), against
+        which a state's age is judged."""
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _log_mode(self, was: int, mode: int, reason: str) -> None:
         # one call site per severity: rclpy refuses a severity change at the same site
@@ -348,13 +354,19 @@ class PdPlusNode(Node):
         waits for enable; or the reason it was refused. Either way ~/plan_status says so."""
         if result.get('ok'):
             try:
-                prof = profile_from_result(result)
-                if self.time_driven != isinstance(prof, TimeTrajectory):
+                if self.time_driven != (result['kind'] == 'time'):
                     raise ProfileError(f"{'time' if self.time_driven else 'theta'}-driven mode "
                                        f"cannot use a {result['kind']} profile")
+                # built in slices (no long hold of the interpreter lock: the control thread
+                # runs between them), then frozen for the garbage collector as at start-up
+                prof = profile_from_result(result, sliced=True)
+                gc.freeze()
                 with self._lock:
                     why = (self.ctrl.set_time_trajectory(prof) if self.time_driven
-                           else self.ctrl.set_path_profile(prof))
+                           else self.ctrl.set_path_profile(prof, result.get('path'),
+                                                           result.get('tracker')))
+                if result.get('path') is not None:
+                    why += f" (on its own {result.get('path_type', '')} path)"
             except ProfileError as exc:
                 result = dict(result, ok=False, reason=str(exc))
         sm = result.get('summary', {})
