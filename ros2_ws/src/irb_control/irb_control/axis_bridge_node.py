@@ -140,6 +140,13 @@ class AxisBridge(Node):
         with self.lock:
             if key != self.last_key:              # answers an older state: too late
                 self.core.stats.late_commands += 1
+                newest = self.last_key
+                self.get_logger().warn(
+                    f'torque_command refused ({self.core.stats.late_commands} late so far): it '
+                    f'answers the state stamped {key * 1e-9:.6f} s, '
+                    + (f'{(newest - key) * 1e-6:.1f} ms older than the newest state'
+                       if newest is not None and key < newest else 'not the newest state'),
+                    throttle_duration_sec=1.0)
                 return
             data = self.core.on_command(tau, time.monotonic(), key)
         if data is not None:

@@ -7,27 +7,31 @@ import threading
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
-from irb_description.node_main import declare, spin_until_signal
+from irb_description.node_help import Param
+from irb_description.node_main import declare_params, spin_until_signal
+
+
+#: the real-time parameters of every loop node (simulator, pdplus, axis_bridge)
+REALTIME_PARAMS = (
+    Param('realtime_priority', 0, '', 'SCHED_FIFO priority 1-99 of the process threads '
+          '(executor and DDS); 0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit; '
+          'a warning, not an error, when refused'),
+    Param('cpu_dma_latency_us', -1, 'us', 'while the node runs, ask the kernel (PM QoS, '
+          '/dev/cpu_dma_latency) to keep the CPUs out of idle states slower to leave than '
+          'this; 0 = no deep idle (idle CPUs poll: lowest wake-up latency, more power); -1 = '
+          'leave alone. Needs write access to /dev/cpu_dma_latency; a warning when refused'),
+    Param('cpu_affinity', [], '', 'CPUs the process threads may run on; [] = all',
+          type='int[]'),
+)
 
 
 def declare_realtime(node: Node) -> tuple[int, list[int], int]:
     """Declare ``realtime_priority``, ``cpu_affinity`` and ``cpu_dma_latency_us`` (the same
-    on every loop node) and return their values; ValueError for a priority outside 0-99, a
-    negative CPU or a latency below -1."""
-    prio = declare(node, 'realtime_priority', 0,
-                   'SCHED_FIFO priority 1-99 of the process threads (executor and DDS); 0 = '
-                   'normal scheduling. Needs CAP_SYS_NICE or an rtprio limit; a warning, not '
-                   'an error, when refused')
-    cpus = declare(node, 'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
-                   'CPUs the process threads may run on; [] = all') or []
-    lat = int(declare(node, 'cpu_dma_latency_us', -1,
-                      '[us] while the node runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) '
-                      'to keep the CPUs out of idle states slower to leave than this; 0 = no '
-                      'deep idle (idle CPUs poll: lowest wake-up latency, more power); -1 = '
-                      'leave alone. Needs write access to /dev/cpu_dma_latency; a warning, '
-                      'not an error, when refused'))
+    on every loop node, ``REALTIME_PARAMS``) and return their values; ValueError for a
+    priority outside 0-99, a negative CPU or a latency below -1."""
+    v = declare_params(node, REALTIME_PARAMS)
+    prio, cpus, lat = int(v['realtime_priority']), v['cpu_affinity'], int(v['cpu_dma_latency_us'])
     prio, cpus = int(prio), [int(c) for c in cpus]
     if not 0 <= prio <= 99:
         raise ValueError(f'realtime_priority must be 0 (off) or 1-99, not {prio}')
@@ -56,6 +60,20 @@ def hold_cpu_latency(us: int, path: str = '/dev/cpu_dma_latency') -> str:
         return str(exc)
     _LATENCY_REQUESTS.append(f)
     return ''
+
+
+def fifo_refusal(priority: int) -> str:
+    """'' when this process may run SCHED_FIFO at ``priority`` (1-99), else why not (tried on
+    the calling thread and undone at once; nothing else changes)."""
+    if priority <= 0:
+        return 'realtime_priority is 0'
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, policy, param)
+        return ''
+    except (OSError, AttributeError) as exc:
+        return f'SCHED_FIFO {priority} not granted ({exc})'
 
 
 def process_threads() -> list[int]:
