@@ -25,7 +25,7 @@ from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES, MODE_TORQUE, error_text
-from .node_util import declare_realtime, spin_with
+from .node_util import LogThread, declare_realtime, spin_with
 
 
 class AxisBridge(Node):
@@ -53,6 +53,7 @@ class AxisBridge(Node):
         self.executor_kind = declare(self, 'executor', 'events',
                                      "'events' (rclpy EventsExecutor, faster) or 'single'")
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
+        self.log = LogThread(lambda: self.get_logger())      # lines of the command path
         self.core = BridgeCore(link_timeout, max_age, window, confirm)
         self.peer = (self.axis_address, self.command_port)
         self.joint_names = RobotModel.load().joint_names
@@ -141,12 +142,12 @@ class AxisBridge(Node):
             if key != self.last_key:              # answers an older state: too late
                 self.core.stats.late_commands += 1
                 newest = self.last_key
-                self.get_logger().warn(
+                self.log.warn(
                     f'torque_command refused ({self.core.stats.late_commands} late so far): it '
                     f'answers the state stamped {key * 1e-9:.6f} s, '
                     + (f'{(newest - key) * 1e-6:.1f} ms older than the newest state'
                        if newest is not None and key < newest else 'not the newest state'),
-                    throttle_duration_sec=1.0)
+                    throttle_s=1.0, key='late')
                 return
             data = self.core.on_command(tau, time.monotonic(), key)
         if data is not None:

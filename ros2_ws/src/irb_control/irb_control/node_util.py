@@ -3,7 +3,9 @@ spin_until_signal live in irb_description.node_main, shared by every node packag
 from __future__ import annotations
 
 import os
+import queue
 import threading
+import time
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -166,3 +168,61 @@ def spin_with(executor_kind: str, realtime: tuple[int, list[int], int] = (0, [],
         finally:
             executor.shutdown()
     return spin
+
+
+class LogThread:
+    """A node's log lines written on a thread of their own.
+
+    rclpy's logger looks up its caller's source file on every call (``inspect.getframeinfo``:
+    realpath, stat and lstat of the file): 1-2 ms per line measured here, far more on a
+    loaded machine or a slow file system. On the control thread that time is a stall: the
+    line "mode idle -> ramp" after the first ramp step is the likeliest cause of the 23 and
+    87 ms first ramp steps that latched "stall: no valid joint_states processed" (issue 32).
+    ``info``/``warn``/``error`` only queue the line (a few microseconds); ``throttle_s``
+    drops lines of the same ``key`` (default: the text's first 40 characters) within that
+    time. ``flush()`` waits until every queued line is written (tests, shutdown)."""
+
+    def __init__(self, get_logger):
+        self._get_logger = get_logger       # called in the thread (tests may replace it)
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._last: dict = {}
+        self._idle = threading.Event()
+        self._idle.set()
+        self._thread = threading.Thread(target=self._run, name='log_writer', daemon=True)
+        self._thread.start()
+
+    def info(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('info', text, throttle_s, key)
+
+    def warn(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('warn', text, throttle_s, key)
+
+    def error(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('error', text, throttle_s, key)
+
+    def _put(self, severity, text, throttle_s, key) -> None:
+        if throttle_s > 0:
+            key = (severity, text[:40]) if key is None else key
+            now = time.monotonic()
+            if now - self._last.get(key, -1e18) < throttle_s:
+                return
+            self._last[key] = now
+        self._idle.clear()
+        self._q.put((severity, text))
+
+    def flush(self, timeout: float = 10.0) -> bool:
+        return self._idle.wait(timeout)
+
+    def _run(self) -> None:
+        while True:
+            severity, text = self._q.get()
+            logger = self._get_logger()
+            # one call site per severity: rclpy refuses a severity change at the same site
+            if severity == 'error':
+                logger.error(text)
+            elif severity == 'warn':
+                logger.warning(text)
+            else:
+                logger.info(text)
+            if self._q.empty():
+                self._idle.set()

@@ -32,7 +32,7 @@ from std_srvs.srv import Trigger
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import REALTIME_PARAMS, declare_realtime, spin_with
+from .node_util import REALTIME_PARAMS, LogThread, declare_realtime, spin_with
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
@@ -149,6 +149,8 @@ class PdPlusNode(Node):
         P = declare_params(self, [x for x in SPEC.params if x not in REALTIME_PARAMS])
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
         self.P = P
+        # log lines are written on a thread of their own (LogThread: 1-2 ms each in rclpy)
+        self.log = LogThread(lambda: self.get_logger())
         self.model = RobotModel.load()
         try:
             self.path = (load_path_file(P['path_file']) if P['path_file'] else
@@ -269,7 +271,7 @@ class PdPlusNode(Node):
             sec, nanosec, names, position, velocity, _ = self._decoder.decode(data)
         except ValueError as exc:
             self.ctrl.step(math.nan, _NAN3, _NAN3)      # counted as a rejected input
-            self.get_logger().warn(f'joint_states refused: {exc}', throttle_duration_sec=1.0)
+            self.log.warn(f'joint_states refused: {exc}', throttle_s=1.0)
             return
         q, qd = self._select(names, position, velocity)
         self._last_q = q
@@ -354,8 +356,8 @@ class PdPlusNode(Node):
             hint = ('both in system time: the state waited longer than the watchdog limit '
                     '(a stall of pdplus or of the network), or the system clocks of the hosts '
                     'differ (synchronise them, e.g. chrony)')
-        self.get_logger().warn(f'joint_states stamped {stamp:.6f} s refused: {old}; {hint}',
-                               throttle_duration_sec=1.0)
+        self.log.warn(f'joint_states stamped {stamp:.6f} s refused: {old}; {hint}',
+                      throttle_s=1.0, key='stamp')
 
     def _use_sim_time(self) -> None:
         """Switch to simulated time (/clock), with the watchdog's simulated-time minimum and no
@@ -366,7 +368,7 @@ class PdPlusNode(Node):
         self.watchdog = Watchdog(T, P['watchdog_missed_samples'],
                                  P['watchdog_sim_time_timeout_s'])
         self._settle = SettleGate(0.0, T)
-        self.get_logger().info('joint_states are stamped in simulated time and /clock is '
+        self.log.info('joint_states are stamped in simulated time and /clock is '
                                'published (a simulator in lockstep): pdplus now uses /clock '
                                '(use_sim_time:=true)')
 
@@ -380,9 +382,9 @@ class PdPlusNode(Node):
         text = f'mode {MODE_NAMES[was]} -> {MODE_NAMES[mode]}' + (f': {reason}' if reason
                                                                  else '')
         if mode == MODE_STOPPED:
-            self.get_logger().error(text)
+            self.log.error(text)
         else:
-            self.get_logger().info(text)
+            self.log.info(text)
 
     def _try_auto_enable(self, now: float) -> None:
         """auto_enable (start-up only): enable once the joint states have arrived without a
@@ -392,8 +394,8 @@ class PdPlusNode(Node):
             return
         if self.pub_cmd.get_subscription_count() == 0:
             self._cmd_matched_at = None
-            self.get_logger().info('auto_enable: waiting for a subscriber of torque_command',
-                                   throttle_duration_sec=5.0)
+            self.log.info('auto_enable: waiting for a subscriber of torque_command',
+                          throttle_s=5.0)
             return
         # the writer sees the subscriber before the subscriber's side has matched this writer:
         # until then commands are dropped (a CI run: 4 commands of a whole ramp reached the
@@ -406,7 +408,7 @@ class PdPlusNode(Node):
         ok, text = self._enable()
         if ok or 'axis' not in text:          # waiting for the axis status keeps it pending
             self._auto_enable_pending = False
-        self.get_logger().info(f'auto_enable: {text}', throttle_duration_sec=5.0)
+        self.log.info(f'auto_enable: {text}', throttle_s=5.0, key='auto_enable')
 
     def _watch_loop(self) -> None:
         """The watchdog on a thread of its own: every half period, on the steady clock, the age
@@ -422,7 +424,7 @@ class PdPlusNode(Node):
                     if self.ctrl.mode == MODE_STOPPED:
                         continue
                     self.ctrl.stop(f'watchdog: no valid joint_states for {now - last:.4f} s')
-                self.get_logger().error(f'safe stop: {self.ctrl.stop_reason}')
+                self.log.error(f'safe stop: {self.ctrl.stop_reason}')
                 self._publish_stopped()
 
     def _publish_stopped(self) -> None:
@@ -479,7 +481,7 @@ class PdPlusNode(Node):
         """The drives' status: an error while moving is a latched stop."""
         old, self.axis = self.axis, msg
         if msg.error and (old is None or not old.error):
-            self.get_logger().error(f'{msg.source}: error {msg.error:#x} ({msg.error_text}); '
+            self.log.error(f'{msg.source}: error {msg.error:#x} ({msg.error_text}); '
                                     'enable is refused until it is reset')
         if msg.error and self.ctrl.mode != MODE_STOPPED:
             with self._lock:
@@ -515,7 +517,7 @@ class PdPlusNode(Node):
     def on_enable(self, request, response):
         self._auto_enable_pending = False
         response.success, response.message = self._enable()
-        self.get_logger().info(f'enable: {response.message}')
+        self.log.info(f'enable: {response.message}')
         return response
 
     def on_stop(self, request, response):
@@ -524,10 +526,11 @@ class PdPlusNode(Node):
             self.ctrl.stop('stop service')
         self._publish_stopped()
         response.success, response.message = True, 'stopped (latched until enable)'
-        self.get_logger().warn('stop service: safe stop latched')
+        self.log.warn('stop service: safe stop latched')
         return response
 
     def destroy_node(self):
+        self.log.flush(2.0)
         self._closing.set()
         self.gate.stop()
         return super().destroy_node()

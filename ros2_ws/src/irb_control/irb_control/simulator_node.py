@@ -32,8 +32,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
-from .node_util import (REALTIME_PARAMS, apply_realtime, declare_realtime, fifo_refusal,
-                        make_executor)
+from .node_util import (REALTIME_PARAMS, LogThread, apply_realtime, declare_realtime,
+                        fifo_refusal, make_executor)
 from .plant import (Plant, PlantConfig, config_path, default_plant_yaml,
                     load_plant_friction)
 from .plant_effects import load_plant_effects
@@ -112,6 +112,7 @@ class SimulatorNode(Node):
         p = declare_params(self, [x for x in SPEC.params if x not in REALTIME_PARAMS])
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): _spin
         self.p = p
+        self.log = LogThread(lambda: self.get_logger())      # lines of the hot path
         if p['mode'] not in MODES:
             raise ValueError(f"mode must be one of {MODES}, not {p['mode']!r}")
         if not p['lockstep_rate'] > 0:
@@ -214,12 +215,12 @@ class SimulatorNode(Node):
             # command never acts on the robot (a pdplus frozen and resumed answers old states)
             self.stale_commands += 1
             newest = self._newest_key
-            self.get_logger().warn(
+            self.log.warn(
                 f'torque_command refused ({self.stale_commands} so far): it answers the state '
                 f'stamped {sec}.{nanosec:09d}, '
                 + (f'{(newest - key) * 1e-6:.1f} ms older than the newest state sent'
                    if newest is not None and key < newest else 'not the newest state sent'),
-                throttle_duration_sec=1.0)
+                throttle_s=1.0, key='stale')
             return
         self.plant.command(tau)
         self.latencies.append(now - t_sent)

@@ -26,6 +26,8 @@ class _Log:
     def info(self, text, **kw):
         self.lines.append(text)
 
+    warning = error = warn
+
     def __getattr__(self, name):
         return getattr(self.logger, name)
 
@@ -57,6 +59,7 @@ def pdplus(request):
 def test_simulated_stamp_on_the_system_clock_says_so_and_follows_clock(pdplus):
     node, log, ctx = pdplus
     node.on_state_raw(state(12.0))              # a lockstep simulator's 12th second
+    node.log.flush()
     assert node.rejected_stale == 1
     assert ('state stamped in simulated time (/clock) but pdplus uses the system clock: set '
             'use_sim_time:=true' in log.lines[-1]), log.lines
@@ -66,6 +69,7 @@ def test_simulated_stamp_on_the_system_clock_says_so_and_follows_clock(pdplus):
     peer.create_publisher(Clock, '/clock', 10)
     node._clock_probe_due = 0.0
     node.on_state_raw(state(12.004))
+    node.log.flush()
     assert node.get_parameter('use_sim_time').value is True
     assert node.watchdog.timeout_s >= 1.0 and 'pdplus now uses /clock' in log.lines[-1]
     peer.destroy_node()
@@ -75,6 +79,7 @@ def test_simulated_stamp_on_the_system_clock_says_so_and_follows_clock(pdplus):
 def test_system_stamp_on_simulated_time_says_so(pdplus):
     node, log, _ = pdplus
     node.on_state_raw(state(1795747175.667))
+    node.log.flush()
     assert node.rejected_stale == 1
     assert 'state stamped in system time but pdplus uses simulated time (/clock' in \
         log.lines[-1], log.lines
@@ -86,4 +91,5 @@ def test_both_on_system_time_names_a_stall_or_the_hosts_clocks(pdplus):
     node, log, _ = pdplus
     now = node.get_clock().now().nanoseconds * 1e-9
     node.on_state_raw(state(now - 0.5))
+    node.log.flush()
     assert 'both in system time' in log.lines[-1] and 'clocks of the hosts' in log.lines[-1]

@@ -45,7 +45,7 @@ class _Log:
     def warn(self, text, **kw):
         self.warnings.append(text)
 
-    warning = warn
+    warning = error = warn
 
     def __getattr__(self, name):
         return getattr(self.logger, name)
@@ -98,6 +98,7 @@ def test_an_answer_to_an_old_state_never_acts_on_the_simulated_robot(ctx):
         for k in range(2, 250):
             state(k)
         sim.on_command_raw(late)                             # resumed: on the wire now
+        sim.log.flush()
         assert len(applied) == 1, 'an answer to a state 1 s old acted on the robot'
         assert sim.stale_commands == 1
         assert log.warnings and '999.9 ms' in log.warnings[-1] and 'older than the newest' in \
@@ -138,6 +139,7 @@ def test_the_axis_bridge_refuses_an_answer_to_an_old_state(ctx):
         cmd.header.stamp.sec, cmd.header.stamp.nanosec = old // 10**9, old % 10**9
         late = bridge.core.stats.late_commands
         bridge.on_command(cmd)
+        bridge.log.flush()
         assert not sent and bridge.core.stats.late_commands == late + 1
         assert log.warnings and '1000.0 ms older than the newest state' in log.warnings[-1]
     finally:
