@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import queue
+import sys
 import threading
 import time
 
@@ -142,6 +143,19 @@ def apply_realtime(priority: int, cpus=(), logger=None, threads=None,
                     f"latency " + (f"<= {out['cpu_dma_latency_us']} us"
                                    if out['cpu_dma_latency_us'] >= 0 else 'not set'))
     return out
+
+
+#: interpreter-lock switch interval of the loop nodes [s] (Python's default: 5 ms)
+SWITCH_INTERVAL_S = 0.0005
+
+
+def short_switch_interval() -> None:
+    """A thread of Python code that holds the interpreter lock gives it up to a waiting
+    thread only after the switch interval: 5 ms by default, more than a period at 248 Hz. The
+    loop nodes' other threads (log writer, plan reader, watchdog) run Python code; with 0.5 ms
+    the control thread gets the lock within a fraction of a period (call it in main, not on
+    import: it is process-wide)."""
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
 
 
 def make_executor(kind: str, context=None):

@@ -32,7 +32,8 @@ from std_srvs.srv import Trigger
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import REALTIME_PARAMS, LogThread, declare_realtime, spin_with
+from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_switch_interval,
+                        spin_with)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
@@ -574,6 +575,7 @@ class PathConfigError(ValueError):
 
 
 def main(args=None):
+    short_switch_interval()
     try:
         run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
                  args, spec=SPEC)

@@ -33,7 +33,7 @@ from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import (REALTIME_PARAMS, LogThread, apply_realtime, declare_realtime,
-                        fifo_refusal, make_executor)
+                        fifo_refusal, make_executor, short_switch_interval)
 from .plant import (Plant, PlantConfig, config_path, default_plant_yaml,
                     load_plant_friction)
 from .plant_effects import load_plant_effects
@@ -406,6 +406,7 @@ def _spin(node: SimulatorNode) -> None:
 
 
 def main(args=None):
+    short_switch_interval()
     run_node(SimulatorNode, _spin, args, spec=SPEC)
 
 
