@@ -83,7 +83,9 @@ SPEC = NodeSpec(
         Param('plant_electrical_file', '', '', "plant electrical parameters YAML ('' = "
               "config/plant_electrical.yaml); 'none' = do not publish electrical_power"),
         Param('status_period_s', 0.1, 's', 'axis_status at least this often (and on change)'),
-        Param('lockstep_wait_s', 0.05, 's', 'lockstep/paced: wall time to wait for a command'),
+        Param('lockstep_wait_s', 0.5, 's', 'lockstep/paced: wall time to wait for the command '
+              'answering a state before stepping without it (3 such steps: brakes); below '
+              "pdplus's simulated-time watchdog (1 s)"),
         Param('stats_path', '', '', "write loop statistics JSON here at exit ('' = no)"),
         Param('executor', 'events', '', "'events' (EventsExecutor, lower latency) or "
               "'single'"),
@@ -324,6 +326,8 @@ class SimulatorNode(Node):
                 self._after_step(_stamp)
                 if paced:       # simulated time runs at lockstep_rate x the wall clock
                     due = wall0 + self.plant.state.t / rate
+                    if time.monotonic() - due > 0.1:         # fell behind: no sprint after
+                        wall0 = time.monotonic() - self.plant.state.t / rate
                     while running(self.context) and time.monotonic() < due:
                         executor.spin_once(timeout_sec=due - time.monotonic())
             return
