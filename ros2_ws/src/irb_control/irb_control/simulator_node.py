@@ -87,6 +87,8 @@ SPEC = NodeSpec(
               'answering a state before stepping without it (3 such steps: brakes); below '
               "pdplus's simulated-time watchdog (1 s)"),
         Param('stats_path', '', '', "write loop statistics JSON here at exit ('' = no)"),
+        Param('stats_per_state', False, '', 'stats_path: also every state (steady-clock time '
+              'it went out, latency of its answer or null): the benchmarks\' windows'),
         Param('executor', 'events', '', "'events' (EventsExecutor, lower latency) or "
               "'single'"),
         *REALTIME_PARAMS),
@@ -172,6 +174,7 @@ class SimulatorNode(Node):
         # loop statistics: state publish time per stamp, latency of the matching command
         self._sent: dict[int, float] = {}
         self._newest_key: int | None = None
+        self._per_state = [] if p['stats_per_state'] and p['stats_path'] else None
         self._answered_k = -1
         self._k = 0
         self.latencies: list[float] = []
@@ -226,6 +229,8 @@ class SimulatorNode(Node):
             return
         self.plant.command(tau)
         self.latencies.append(now - t_sent)
+        if self._per_state:
+            self._per_state[-1][1] = round((now - t_sent) * 1e3, 4)
         self._answered_k = self._k
 
     def _effort(self, names: tuple, effort) -> np.ndarray | None:
@@ -271,6 +276,8 @@ class SimulatorNode(Node):
         key = sec * 1_000_000_000 + nanosec
         self._sent = {key: time.monotonic()}      # only the latest state can be answered
         self._newest_key = key
+        if self._per_state is not None:
+            self._per_state.append([self._sent[key], None])
         self.pub_state.publish(data)
         if self.pub_power is not None:
             e, qd = self.electrical, self.plant.state.qd
@@ -374,7 +381,9 @@ class SimulatorNode(Node):
                 'state_publish_late_ms': _percentiles(np.array(self.tick_late) * 1e3),
                 'sim_time_s': self.plant.state.t,
                 'wall_time_s': time.monotonic() - self.t_wall0,
-                'energy_j': self.plant.state.energy}
+                'energy_j': self.plant.state.energy,
+                **({'per_state_monotonic_s_latency_ms': self._per_state}
+                   if self._per_state is not None else {})}
 
 
 def _percentiles(x: np.ndarray) -> dict | None:
