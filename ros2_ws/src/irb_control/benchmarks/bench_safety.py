@@ -190,7 +190,7 @@ def _plans_run(window_s: float, sizes: list[int] | None) -> dict:
                                stdout=subprocess.PIPE, text=True, start_new_session=True)
     stats = g.logdir / 'sim_stats.json'
     try:
-        g.start('simulator', 'irb_control', 'simulator', f'stats_path:={stats}')
+        g.start('simulator', 'irb_control', 'simulator', 'mode:=realtime', f'stats_path:={stats}')
         g.start('pdplus', 'irb_control', 'pdplus', 'profile_duration_s:=30.0',
                 'auto_enable:=false')
         if pub is not None:
@@ -256,7 +256,8 @@ def bench_soak(minutes: float, path: str, load: bool, rt: int = 0,
                     f'command_port:={cp}', *rtp)
             reset = 'axis_bridge/reset'
         else:
-            g.start('simulator', 'irb_control', 'simulator', f'stats_path:={sim_stats}', *rtp)
+            g.start('simulator', 'irb_control', 'simulator', 'mode:=realtime',
+                    f'stats_path:={sim_stats}', *rtp)
             reset = 'simulator/reset'
         g.start('pdplus', 'irb_control', 'pdplus', 'profile_duration_s:=10.0',
                 'auto_enable:=false', *rtp)

@@ -2,6 +2,8 @@
 """Benchmarks of irb_control; each prints JSON and writes it (and plots) to results/.
 
     python benchmarks/run_benchmarks.py loop      # simulator <-> pdplus, two processes, 248 Hz
+    python benchmarks/run_benchmarks.py handover  # the loop while 20k-point plans arrive and
+                                                  # during enable (issue 32)
     python benchmarks/run_benchmarks.py accuracy  # path accuracy + energy, no/nominal/true FF
     python benchmarks/run_benchmarks.py speed     # offline simulation speed
     python benchmarks/run_benchmarks.py all
@@ -165,6 +167,207 @@ def _loop_run(duration: float, rt_priority: int) -> dict:
     out['goal_met'] = bool(lat and lat['p99'] < 1.0 and out['missed_fraction'] < 0.001
                            and out['max_consecutive_missed'] < 3)
     out['load_average_1_5_15_min_at_end'] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+# --- (1b) the loop while plans arrive and during enable (issue 32) --------------------------
+def _plan_20k(model, spec: dict, points: int, duration: float, stamp_sec: int):
+    """A JointTrajectory of ``points`` points along the path ``spec`` (polynomial speed law),
+    carrying its path (irb_description.plan_path), as the planner sends plans."""
+    from irb_description.path import path_from_spec
+    from irb_description.plan_path import path_frame_id
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from irb_control.profiles import polynomial_theta_of_time, profile_from_theta_samples
+    t, th, thd, thdd = polynomial_theta_of_time(duration, n=points)
+    prof = profile_from_theta_samples(model, path_from_spec(spec), th, thd, thdd, t,
+                                      grid=points)
+    msg = JointTrajectory(joint_names=['joint_1', 'joint_2', 'joint_3'])
+    msg.header.stamp.sec = stamp_sec
+    msg.header.frame_id = path_frame_id(spec)
+    for k in range(points):
+        p = JointTrajectoryPoint(positions=prof.q[k].tolist(), velocities=prof.qd[k].tolist(),
+                                 accelerations=prof.qdd[k].tolist())
+        p.time_from_start.sec = int(prof.t[k])
+        p.time_from_start.nanosec = int(round((prof.t[k] % 1) * 1e9))
+        msg.points.append(p)
+    return msg
+
+
+def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -> dict:
+    """simulator (real time) + pdplus as processes; a listener records every joint state and
+    every torque command (reliable, bytes only) with its arrival time. ``cycles`` times, while
+    pdplus holds the end of the previous motion: a ``points``-point plan on a new path is
+    published (window: 0.2 s before to 1 s after pdplus's verdict), then ``~/enable`` is
+    called (window: 0.2 s before the call to 1 s after it: ramp construction and the first
+    ramp steps), and the motion runs to its hold. Per window: states that got no command
+    (by stamp), the state -> command latency at the listener, pdplus's step time; the same
+    for quiet windows of equal length while holding (the baseline)."""
+    import rclpy
+    from irb_description.model import RobotModel
+    from irb_description.node_main import latched_qos
+    from irb_interfaces.msg import ControllerState, PlanStatus
+    from rclpy.serialization import deserialize_message
+    from std_srvs.srv import Trigger
+    from trajectory_msgs.msg import JointTrajectory
+
+    from irb_control.node_util import make_executor
+    model = RobotModel.load()
+    paths = [{'type': 'line', 'waypoints': [[0.55, -0.10, 0.30], [0.75, 0.10, 0.30]]},
+             {'type': 'arc', 'center': [0.65, 0.0, 0.25], 'normal': [0.0, 0.0, 1.0],
+              'radius': 0.08, 'start_angle': 0.0, 'sweep': 3.0}]
+    plans = [_plan_20k(model, paths[k % 2], points, 3.0, 100 + k) for k in range(cycles)]
+    ns = f'/handover{os.getpid()}'
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    common = ['--ros-args', '-r', f'__ns:={ns}', '-p', f'realtime_priority:={rt_priority}']
+    logs = {n: open(RESULTS / f'handover_{n}.log', 'w') for n in ('pdplus', 'simulator')}
+    ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
+                             '-p', 'profile_duration_s:=3.0', '-p', 'auto_enable:=false',
+                             '-p', f'max_plan_points:={points}'],
+                            stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
+    sim_stats = RESULTS / 'handover_simulator_stats.json'
+    sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
+                            '-p', 'mode:=realtime', '-p', f'stats_path:={sim_stats}',
+                            '-p', 'stats_per_state:=true'],
+                           stdout=logs['simulator'], stderr=subprocess.STDOUT, text=True)
+    rclpy.init()
+    node = rclpy.create_node('bench_handover')
+    cs, verdicts = [], []
+    clock = time.monotonic
+    node.create_subscription(ControllerState, f'{ns}/controller_state',
+                             lambda b: cs.append((clock(), b)), 1000, raw=True)
+    node.create_subscription(PlanStatus, f'{ns}/pdplus/plan_status',
+                             lambda m: verdicts.append((clock(), m)), latched_qos())
+    pub = node.create_publisher(JointTrajectory, f'{ns}/planned_trajectory', latched_qos())
+    enable = node.create_client(Trigger, f'{ns}/pdplus/enable')
+    ex = make_executor('single')
+    ex.add_node(node)
+
+    def spin_until(cond, limit):
+        end = clock() + limit
+        while not cond() and clock() < end:
+            ex.spin_once(timeout_sec=0.02)
+        return cond()
+
+    def mode():
+        return deserialize_message(cs[-1][1], ControllerState).mode if cs else None
+
+    reset = node.create_client(Trigger, f'{ns}/simulator/reset')
+    platform_stops = []
+
+    def call_enable():
+        for _ in range(100):                    # until the drives' status has reached it
+            fut = enable.call_async(Trigger.Request())
+            spin_until(fut.done, 30.0)
+            r = fut.result()
+            if r.success:
+                return r
+            if 'reset it first' in r.message:   # the simulator braked (a platform stall)
+                platform_stops.append(r.message)
+                f = reset.call_async(Trigger.Request())
+                spin_until(f.done, 30.0)
+            elif 'axis status' not in r.message:
+                return r
+            spin_until(lambda: False, 0.2)
+        return r
+    events = []          # (kind, t_start, t_end) windows on the listener's clock
+    load_start = [round(x, 2) for x in os.getloadavg()]
+    try:
+        assert enable.wait_for_service(timeout_sec=60.0), 'pdplus did not come up'
+        spin_until(lambda: len(cs) > 250, 60.0)
+        r = call_enable()                                    # the built-in circle first
+        assert r.success, r.message
+        while not spin_until(lambda: mode() == ControllerState.MODE_HOLD, 60.0):
+            assert mode() == ControllerState.MODE_STOPPED and len(platform_stops) < 10, \
+                'no hold'
+            platform_stops.append(deserialize_message(cs[-1][1], ControllerState).stop_reason)
+            assert call_enable().success
+        for k, plan in enumerate(plans):
+            spin_until(lambda: False, 1.0)
+            t = clock()
+            events.append(('quiet', t, t + 1.2))
+            spin_until(lambda: False, 1.3)
+            n = len(verdicts)
+            t0 = clock()
+            pub.publish(plan)
+            assert spin_until(lambda: len(verdicts) > n and verdicts[-1][1].plan_stamp.sec ==
+                              plan.header.stamp.sec, 120.0), 'no verdict'
+            tv = verdicts[-1][0]
+            assert verdicts[-1][1].accepted, verdicts[-1][1].reason
+            events.append(('plan', tv - 0.2, tv + 1.0))
+            events.append(('plan_whole', t0, tv + 1.0))
+            spin_until(lambda: False, 1.2)
+            t1 = clock()
+            r = call_enable()
+            assert r.success, r.message
+            events.append(('enable', t1 - 0.2, t1 + 1.0))
+            assert spin_until(lambda: mode() == ControllerState.MODE_RAMP, 10.0)
+            assert spin_until(lambda: mode() in (ControllerState.MODE_HOLD,
+                                                 ControllerState.MODE_STOPPED), 60.0)
+            if mode() == ControllerState.MODE_STOPPED:       # a stop: recorded, go on
+                events.append(('stopped', clock(), clock()))
+                platform_stops.append(deserialize_message(cs[-1][1],
+                                                          ControllerState).stop_reason)
+                assert call_enable().success
+                assert spin_until(lambda: mode() in (ControllerState.MODE_HOLD,
+                                                     ControllerState.MODE_STOPPED), 60.0)
+        spin_until(lambda: False, 1.3)
+    finally:
+        for p in (sim, ctrl):
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        for f in logs.values():
+            f.close()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    steps = [(t, deserialize_message(b, ControllerState)) for t, b in cs]
+
+    # the simulator's own record: when each state went out and when its answer came back
+    # (CLOCK_MONOTONIC, the same clock in every process of the host; the listener's arrival
+    # times lag on a loaded machine)
+    per_state = json.loads(sim_stats.read_text())['per_state_monotonic_s_latency_ms']
+
+    def window(kind, a, b):
+        ss = [(t, lat) for t, lat in per_state if a <= t <= b]
+        unanswered = sum(1 for _, lat in ss if lat is None)
+        lat = [x for _, x in ss if x is not None]
+        dur = [1e3 * m.step_duration for t, m in steps if a <= t <= b]
+        modes = sorted({int(m.mode) for t, m in steps if a <= t <= b})
+        return {'kind': kind, 'states': len(ss), 'unanswered': unanswered, 'modes': modes,
+                'latency_ms_p50': float(np.median(lat)) if lat else None,
+                'latency_ms_max': float(max(lat)) if lat else None,
+                'pdplus_step_ms_max': float(max(dur)) if dur else None}
+    wins = [window(*e) for e in events if e[0] != 'stopped']
+    # a window in which pdplus was stopped (a platform stall: see stops_and_refusals_seen)
+    # answers nothing by design: counted apart
+    summary = {'windows_with_a_stop': sum(1 for x in wins if ControllerState.MODE_STOPPED
+                                          in x['modes'])}
+    for kind in ('quiet', 'plan', 'plan_whole', 'enable'):
+        w = [x for x in wins if x['kind'] == kind
+             and ControllerState.MODE_STOPPED not in x['modes']]
+        if w:
+            summary[kind] = {
+                'windows': len(w), 'unanswered_total': sum(x['unanswered'] for x in w),
+                'windows_with_unanswered': sum(1 for x in w if x['unanswered']),
+                'latency_ms_max': max(x['latency_ms_max'] or 0.0 for x in w),
+                'latency_ms_p50_median': float(np.median([x['latency_ms_p50'] for x in w
+                                                          if x['latency_ms_p50']])),
+                'pdplus_step_ms_max': max(x['pdplus_step_ms_max'] or 0.0 for x in w)}
+    modes = [int(m.mode) for _, m in steps]
+    out = {'benchmark': 'handover: the 248 Hz loop while plans arrive and during enable '
+                        '(simulator real time + pdplus; unanswered states and state -> command '
+                        "latency from the simulator's own per-state record)",
+           'plan_points': points, 'cycles': cycles, 'realtime_priority': rt_priority,
+           'stopped': any(e[0] == 'stopped' for e in events),
+           'stops_and_refusals_seen': platform_stops,
+           'stop_reasons': sorted({m.stop_reason for _, m in steps if m.stop_reason}),
+           'modes_seen': sorted(set(modes)), 'summary': summary, 'windows': wins,
+           'load_average_1_5_15_min_at_start': load_start}
+    _write('handover' + (f'_rt{rt_priority}' if rt_priority else ''), out)
     return out
 
 
@@ -347,7 +550,10 @@ def bench_speed(repeats: int = 5) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument('which', choices=['loop', 'accuracy', 'speed', 'all'])
+    ap.add_argument('which', choices=['loop', 'handover', 'accuracy', 'speed', 'all'])
+    ap.add_argument('--handover-cycles', type=int, default=4)
+    ap.add_argument('--handover-points', type=int, default=20000)
+    ap.add_argument('--handover-rt-priority', type=int, default=0)
     ap.add_argument('--loop-seconds', type=float, default=20.0)
     ap.add_argument('--loop-rt-priority', type=int, default=20,
                     help='realtime_priority of the second loop run (0: no second run)')
@@ -361,6 +567,8 @@ def main(argv=None):
         bench_accuracy(not a.no_plots)
     if a.which in ('loop', 'all'):
         bench_loop(a.loop_seconds, a.loop_rt_priority, a.loop_repeats)
+    if a.which in ('handover', 'all'):
+        bench_handover(a.handover_cycles, a.handover_points, a.handover_rt_priority)
 
 
 if __name__ == '__main__':

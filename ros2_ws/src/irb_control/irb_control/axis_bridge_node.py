@@ -17,7 +17,9 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, state_pub_qos, state_qos
+from irb_description.node_help import NodeSpec, Param, Topic
+from irb_description.node_main import (declare_params, latched_qos, run_node, state_pub_qos,
+                                       state_qos)
 from irb_description.robot_state import six_joint_names, six_joints
 from irb_interfaces.msg import AxisStatus
 from rclpy.node import Node
@@ -26,7 +28,42 @@ from std_srvs.srv import Trigger
 
 from .axis_bridge_core import BridgeCore
 from .axis_protocol import MODE_NAMES, MODE_TORQUE, error_text
-from .node_util import declare_realtime, spin_with
+from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_switch_interval,
+                        spin_with)
+
+
+SPEC = NodeSpec(
+    'axis_bridge', 'irb_control',
+    "Connects pdplus to a real (or fake) axis computer over the UDP torque protocol "
+    "(doc/axis_protocol.md): STATE packets -> /joint_states and /axis_status; each state is "
+    "answered with the latest /torque_command that carries that state's stamp (any other is "
+    "refused, counted and logged), within one cycle. Always real time (the axis computer is "
+    "the clock master).",
+    params=(
+        Param('bind_address', '127.0.0.1', '', 'local address for STATE packets'),
+        Param('state_port', 6510, '', 'local UDP port for STATE packets'),
+        Param('axis_address', '127.0.0.1', '', 'axis computer address for COMMAND packets '
+              '(the only peer trusted)'),
+        Param('command_port', 6511, '', "axis computer's UDP port for COMMAND packets"),
+        Param('link_timeout_s', 0.1, 's', 'no valid state for longer: link lost'),
+        Param('max_command_age_s', 0.004032, 's', 'never send a command for a state older '
+              'than this'),
+        Param('status_period_s', 0.5, 's', 'period of /axis_bridge/status and /axis_status'),
+        Param('seq_window', 250, 'cycles', 'states further ahead in sequence are a jump, '
+              'adopted only after resync_confirm in a row'),
+        Param('resync_confirm', 3, '', 'consecutive states of a new session (or after a '
+              'jump) before the bridge follows it'),
+        Param('executor', 'events', '', "'events' (rclpy EventsExecutor, faster) or 'single'"),
+        *REALTIME_PARAMS),
+    subscribes=(Topic('torque_command', 'sensor_msgs/JointState',
+                      'effort [N m], header.stamp = the answered state'),),
+    publishes=(Topic('joint_states', 'sensor_msgs/JointState', 'q, qd, measured torque'),
+               Topic('axis_status', 'irb_interfaces/AxisStatus', 'drives (latched)'),
+               Topic('axis_bridge/status', 'diagnostic_msgs/DiagnosticArray',
+                     'link, counters')),
+    services=(Topic('~/reset', 'std_srvs/Trigger', 'commands carry reset = 1 until the axis '
+                    'computer reports no error'),),
+    example='ros2 run irb_control axis_bridge --ros-args -p axis_address:=192.168.125.1')
 
 
 class AxisBridge(Node):
@@ -34,26 +71,14 @@ class AxisBridge(Node):
 
     def __init__(self, **kwargs):
         super().__init__('axis_bridge', **kwargs)
-        self.bind_address = declare(self, 'bind_address', '127.0.0.1',
-                                    'local address for state packets')
-        self.state_port = declare(self, 'state_port', 6510, 'local UDP port for STATE packets')
-        self.axis_address = declare(self, 'axis_address', '127.0.0.1',
-                                    'axis computer address for COMMAND packets')
-        self.command_port = declare(self, 'command_port', 6511,
-                                    "axis computer's UDP port for COMMAND packets")
-        link_timeout = declare(self, 'link_timeout_s', 0.1,
-                               'no valid state for longer: link lost [s]')
-        max_age = declare(self, 'max_command_age_s', 0.004032,
-                          'never send a command for a state older than this [s]')
-        status_period = declare(self, 'status_period_s', 0.5,
-                                'period of /axis_bridge/status and /axis_status [s]')
-        window = declare(self, 'seq_window', 250, 'states more than this many cycles ahead '
-                         'are a jump, adopted only after resync_confirm in a row [-]')
-        confirm = declare(self, 'resync_confirm', 3, 'consecutive states of a new session (or '
-                          'after a jump) before the bridge follows it [-]')
-        self.executor_kind = declare(self, 'executor', 'events',
-                                     "'events' (rclpy EventsExecutor, faster) or 'single'")
+        P = declare_params(self, [x for x in SPEC.params if x not in REALTIME_PARAMS])
+        self.bind_address, self.state_port = P['bind_address'], P['state_port']
+        self.axis_address, self.command_port = P['axis_address'], P['command_port']
+        link_timeout, max_age = P['link_timeout_s'], P['max_command_age_s']
+        status_period, window = P['status_period_s'], P['seq_window']
+        confirm, self.executor_kind = P['resync_confirm'], P['executor']
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
+        self.log = LogThread(lambda: self.get_logger())      # lines of the command path
         self.core = BridgeCore(link_timeout, max_age, window, confirm)
         self.peer = (self.axis_address, self.command_port)
         self.joint_names = RobotModel.load().joint_names
@@ -140,6 +165,13 @@ class AxisBridge(Node):
         with self.lock:
             if key != self.last_key:              # answers an older state: too late
                 self.core.stats.late_commands += 1
+                newest = self.last_key
+                self.log.warn(
+                    f'torque_command refused ({self.core.stats.late_commands} late so far): it '
+                    f'answers the state stamped {key * 1e-9:.6f} s, '
+                    + (f'{(newest - key) * 1e-6:.1f} ms older than the newest state'
+                       if newest is not None and key < newest else 'not the newest state'),
+                    throttle_s=1.0, key='late')
                 return
             data = self.core.on_command(tau, time.monotonic(), key)
         if data is not None:
@@ -194,7 +226,9 @@ class AxisBridge(Node):
 
 
 def main(args=None):
-    run_node(AxisBridge, lambda node: spin_with(node.executor_kind, node.realtime)(node), args)
+    short_switch_interval()
+    run_node(AxisBridge, lambda node: spin_with(node.executor_kind, node.realtime)(node), args,
+             spec=SPEC)
 
 
 if __name__ == '__main__':

@@ -17,11 +17,41 @@ from pathlib import Path
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, run_node, running
+from irb_description.node_help import NodeSpec, Param
+from irb_description.node_main import declare_params, run_node, running
 from rclpy.node import Node
 
 from .fake_axis_core import FAULT_KINDS, FakeAxisCore, FaultConfig
 from .plant import Plant, PlantConfig, default_plant_yaml, load_plant_friction
+
+
+_d = PlantConfig()
+SPEC = NodeSpec(
+    'fake_axis_computer', 'irb_control',
+    'The simulator behind the axis-computer UDP protocol, as the clock master: one STATE '
+    'every period on the steady clock; applies only the COMMAND carrying the current '
+    "cycle's sequence number; after miss_limit cycles without one it brakes and latches an "
+    'error until a command with reset = 1. Fault injection on the outgoing states. No ROS '
+    'topics (UDP only).',
+    params=(
+        Param('bridge_address', '127.0.0.1', '', "bridge's address for STATE packets"),
+        Param('state_port', 6510, '', "bridge's UDP port for states"),
+        Param('bind_address', '127.0.0.1', '', 'local address for COMMAND packets'),
+        Param('command_port', 6511, '', 'local UDP port for commands'),
+        Param('period_s', _d.period_s, 's', 'cycle period'),
+        Param('miss_limit', 3, 'cycles', 'without a valid command: brakes, latched error'),
+        Param('duration_s', 0.0, 's', 'stop after this long; 0 = never'),
+        Param('stats_path', '', '', "write statistics JSON here at exit ('' = no)"),
+        Param('initial_positions', list(_d.initial_q), 'rad', 'start pose of joints 1-3'),
+        Param('seed', _d.seed, '', 'measurement noise seed'),
+        Param('plant_friction_file', '', '', "plant friction YAML; '' = config/plant.yaml"),
+        *(Param(f'fault_{k}', 0.0, '1/cycle', f'probability of a {k} fault per cycle')
+          for k in FAULT_KINDS),
+        Param('fault_delay_s', 0.006, 's', 'delay of a delayed state'),
+        Param('fault_seed', 0, '', 'fault random seed'),
+        Param('bound_controller_only', True, '', 'take commands only from the bridge address '
+              'and its state port (the socket it sends commands from)')),
+    example='ros2 run irb_control fake_axis_computer --ros-args -p fault_drop:=0.01')
 
 
 class FakeAxisComputer(Node):
@@ -29,32 +59,22 @@ class FakeAxisComputer(Node):
 
     def __init__(self, **kwargs):
         super().__init__('fake_axis_computer', **kwargs)
-        d = PlantConfig()
-        self.bridge_address = declare(self, 'bridge_address', '127.0.0.1',
-                                      "bridge's address for STATE packets")
-        self.state_port = declare(self, 'state_port', 6510, "bridge's UDP port for states")
-        bind_address = declare(self, 'bind_address', '127.0.0.1', 'local address')
-        command_port = declare(self, 'command_port', 6511, 'local UDP port for commands')
-        self.period = declare(self, 'period_s', d.period_s, 'cycle period [s]')
-        miss_limit = declare(self, 'miss_limit', 3, 'cycles without a command -> brakes')
-        self.duration = declare(self, 'duration_s', 0.0, 'stop after this long [s]; 0 = never')
-        self.stats_path = declare(self, 'stats_path', '', "write statistics JSON here at exit")
-        initial = declare(self, 'initial_positions', list(d.initial_q), 'start pose [rad]')
-        seed = declare(self, 'seed', d.seed, 'measurement noise seed')
-        ffile = declare(self, 'plant_friction_file', '', "plant friction; '' = plant.yaml")
-        faults = {k: declare(self, f'fault_{k}', 0.0, f'probability of a {k} fault per cycle')
-                  for k in FAULT_KINDS}
-        delay_s = declare(self, 'fault_delay_s', 0.006, 'delay of a delayed state [s]')
-        fault_seed = declare(self, 'fault_seed', 0, 'fault random seed')
+        P = declare_params(self, SPEC.params)
+        self.bridge_address, self.state_port = P['bridge_address'], P['state_port']
+        bind_address, command_port = P['bind_address'], P['command_port']
+        self.period, miss_limit = P['period_s'], P['miss_limit']
+        self.duration, self.stats_path = P['duration_s'], P['stats_path']
+        initial, seed, ffile = P['initial_positions'], P['seed'], P['plant_friction_file']
+        faults = {k: P[f'fault_{k}'] for k in FAULT_KINDS}
+        delay_s, fault_seed = P['fault_delay_s'], P['fault_seed']
         model = RobotModel.load()
         _, friction = load_plant_friction(ffile or str(default_plant_yaml()), model.joint_names)
         # the axis core supervises the commands (miss_limit): the plant's own timeout is off
         plant = Plant(model, friction, PlantConfig(period_s=self.period,
                                                    initial_q=tuple(initial), seed=seed,
                                                    command_timeout_s=1e9))
-        controller = (self.bridge_address, self.state_port) if declare(
-            self, 'bound_controller_only', True, 'take commands only from the bridge address '
-            'and its state port (the socket it sends commands from)') else None
+        controller = ((self.bridge_address, self.state_port) if P['bound_controller_only']
+                      else None)
         self.core = FakeAxisCore(plant, FaultConfig(**faults, delay_s=delay_s, seed=fault_seed),
                                  miss_limit, controller=controller)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -142,7 +162,7 @@ class FakeAxisComputer(Node):
 
 
 def main(args=None):
-    run_node(FakeAxisComputer, lambda node: node.run(), args)
+    run_node(FakeAxisComputer, lambda node: node.run(), args, spec=SPEC)
 
 
 if __name__ == '__main__':

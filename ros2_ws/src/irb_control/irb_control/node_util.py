@@ -3,31 +3,38 @@ spin_until_signal live in irb_description.node_main, shared by every node packag
 from __future__ import annotations
 
 import os
+import queue
+import sys
 import threading
+import time
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
-from irb_description.node_main import declare, spin_until_signal
+from irb_description.node_help import Param
+from irb_description.node_main import declare_params, spin_until_signal
+
+
+#: the real-time parameters of every loop node (simulator, pdplus, axis_bridge)
+REALTIME_PARAMS = (
+    Param('realtime_priority', 0, '', 'SCHED_FIFO priority 1-99 of the process threads '
+          '(executor and DDS); 0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit; '
+          'a warning, not an error, when refused'),
+    Param('cpu_dma_latency_us', -1, 'us', 'while the node runs, ask the kernel (PM QoS, '
+          '/dev/cpu_dma_latency) to keep the CPUs out of idle states slower to leave than '
+          'this; 0 = no deep idle (idle CPUs poll: lowest wake-up latency, more power); -1 = '
+          'leave alone. Needs write access to /dev/cpu_dma_latency; a warning when refused'),
+    Param('cpu_affinity', [], '', 'CPUs the process threads may run on; [] = all',
+          type='int[]'),
+)
 
 
 def declare_realtime(node: Node) -> tuple[int, list[int], int]:
     """Declare ``realtime_priority``, ``cpu_affinity`` and ``cpu_dma_latency_us`` (the same
-    on every loop node) and return their values; ValueError for a priority outside 0-99, a
-    negative CPU or a latency below -1."""
-    prio = declare(node, 'realtime_priority', 0,
-                   'SCHED_FIFO priority 1-99 of the process threads (executor and DDS); 0 = '
-                   'normal scheduling. Needs CAP_SYS_NICE or an rtprio limit; a warning, not '
-                   'an error, when refused')
-    cpus = declare(node, 'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
-                   'CPUs the process threads may run on; [] = all') or []
-    lat = int(declare(node, 'cpu_dma_latency_us', -1,
-                      '[us] while the node runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) '
-                      'to keep the CPUs out of idle states slower to leave than this; 0 = no '
-                      'deep idle (idle CPUs poll: lowest wake-up latency, more power); -1 = '
-                      'leave alone. Needs write access to /dev/cpu_dma_latency; a warning, '
-                      'not an error, when refused'))
+    on every loop node, ``REALTIME_PARAMS``) and return their values; ValueError for a
+    priority outside 0-99, a negative CPU or a latency below -1."""
+    v = declare_params(node, REALTIME_PARAMS)
+    prio, cpus, lat = int(v['realtime_priority']), v['cpu_affinity'], int(v['cpu_dma_latency_us'])
     prio, cpus = int(prio), [int(c) for c in cpus]
     if not 0 <= prio <= 99:
         raise ValueError(f'realtime_priority must be 0 (off) or 1-99, not {prio}')
@@ -56,6 +63,20 @@ def hold_cpu_latency(us: int, path: str = '/dev/cpu_dma_latency') -> str:
         return str(exc)
     _LATENCY_REQUESTS.append(f)
     return ''
+
+
+def fifo_refusal(priority: int) -> str:
+    """'' when this process may run SCHED_FIFO at ``priority`` (1-99), else why not (tried on
+    the calling thread and undone at once; nothing else changes)."""
+    if priority <= 0:
+        return 'realtime_priority is 0'
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, policy, param)
+        return ''
+    except (OSError, AttributeError) as exc:
+        return f'SCHED_FIFO {priority} not granted ({exc})'
 
 
 def process_threads() -> list[int]:
@@ -124,6 +145,19 @@ def apply_realtime(priority: int, cpus=(), logger=None, threads=None,
     return out
 
 
+#: interpreter-lock switch interval of the loop nodes [s] (Python's default: 5 ms)
+SWITCH_INTERVAL_S = 0.0005
+
+
+def short_switch_interval() -> None:
+    """A thread of Python code that holds the interpreter lock gives it up to a waiting
+    thread only after the switch interval: 5 ms by default, more than a period at 248 Hz. The
+    loop nodes' other threads (log writer, plan reader, watchdog) run Python code; with 0.5 ms
+    the control thread gets the lock within a fraction of a period (call it in main, not on
+    import: it is process-wide)."""
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+
+
 def make_executor(kind: str, context=None):
     """'events': rclpy's EventsExecutor (faster; drive it with spin_once), else single."""
     if kind == 'events':
@@ -148,3 +182,61 @@ def spin_with(executor_kind: str, realtime: tuple[int, list[int], int] = (0, [],
         finally:
             executor.shutdown()
     return spin
+
+
+class LogThread:
+    """A node's log lines written on a thread of their own.
+
+    rclpy's logger looks up its caller's source file on every call (``inspect.getframeinfo``:
+    realpath, stat and lstat of the file): 1-2 ms per line measured here, far more on a
+    loaded machine or a slow file system. On the control thread that time is a stall: the
+    line "mode idle -> ramp" after the first ramp step is the likeliest cause of the 23 and
+    87 ms first ramp steps that latched "stall: no valid joint_states processed" (issue 32).
+    ``info``/``warn``/``error`` only queue the line (a few microseconds); ``throttle_s``
+    drops lines of the same ``key`` (default: the text's first 40 characters) within that
+    time. ``flush()`` waits until every queued line is written (tests, shutdown)."""
+
+    def __init__(self, get_logger):
+        self._get_logger = get_logger       # called in the thread (tests may replace it)
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._last: dict = {}
+        self._idle = threading.Event()
+        self._idle.set()
+        self._thread = threading.Thread(target=self._run, name='log_writer', daemon=True)
+        self._thread.start()
+
+    def info(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('info', text, throttle_s, key)
+
+    def warn(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('warn', text, throttle_s, key)
+
+    def error(self, text: str, throttle_s: float = 0.0, key=None) -> None:
+        self._put('error', text, throttle_s, key)
+
+    def _put(self, severity, text, throttle_s, key) -> None:
+        if throttle_s > 0:
+            key = (severity, text[:40]) if key is None else key
+            now = time.monotonic()
+            if now - self._last.get(key, -1e18) < throttle_s:
+                return
+            self._last[key] = now
+        self._idle.clear()
+        self._q.put((severity, text))
+
+    def flush(self, timeout: float = 10.0) -> bool:
+        return self._idle.wait(timeout)
+
+    def _run(self) -> None:
+        while True:
+            severity, text = self._q.get()
+            logger = self._get_logger()
+            # one call site per severity: rclpy refuses a severity change at the same site
+            if severity == 'error':
+                logger.error(text)
+            elif severity == 'warn':
+                logger.warning(text)
+            else:
+                logger.info(text)
+            if self._q.empty():
+                self._idle.set()

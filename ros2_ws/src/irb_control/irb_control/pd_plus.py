@@ -316,21 +316,32 @@ class PdPlusController:
         self._ramp_to = np.zeros(3)
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
-        self._circle = ((float(path.center[0]), float(path.center[1]), path.direction,
-                         path.start_angle) if type(path) is CirclePath else None)
-        # any other path: projection near the previous theta (irb_description.path_tracking)
-        self._tracker = PathTracker(path) if self._circle is None else None
+        self.base_path = path            # the configured path: plans that carry none
+        self.pending_path: PathBase | None = None
+        self._pending_tracker = None
+        self._use_path(path)
         self._friction_par = _parametric_friction(friction)
-        # delay compensation with the commands in flight: the reference accelerations of the
-        # last n commands sent (oldest first), n = prediction_samples; empty after enable/stop
-        dp = c.delay_prediction
-        self._commanded = (dp == 'commanded' or (dp == 'auto' and self._circle is None)) \
-            and c.prediction_samples > 0
         n, T = c.prediction_samples, c.period_s
         # over [t, t + n T) the command j (0 = oldest) acts during [t + j T, t + (j + 1) T):
         # qd(t + Delta) = qd + T sum a_j, q(t + Delta) = q + Delta qd + T^2 sum (n - j - 1/2) a_j
         self._in_flight: deque = deque(maxlen=max(n, 1))
         self._w_pos = [T * T * (n - j - 0.5) for j in range(n)]
+
+    def _use_path(self, path: PathBase, tracker: PathTracker | None = None) -> None:
+        """Make ``path`` the one theta is estimated on (only while nothing runs: at start-up
+        and when enable takes a pending profile with its path)."""
+        c = self.config
+        self.path = path
+        self._circle = ((float(path.center[0]), float(path.center[1]), path.direction,
+                         path.start_angle) if type(path) is CirclePath else None)
+        # any other path: projection near the previous theta (irb_description.path_tracking)
+        self._tracker = None if self._circle is not None else (
+            tracker if tracker is not None and tracker.path is path else PathTracker(path))
+        # delay compensation with the commands in flight: the reference accelerations of the
+        # last n commands sent (oldest first), n = prediction_samples; empty after enable/stop
+        dp = c.delay_prediction
+        self._commanded = (dp == 'commanded' or (dp == 'auto' and self._circle is None)) \
+            and c.prediction_samples > 0
 
     # --- commands ------------------------------------------------------------------------
     def _transition(self, event: str) -> tuple[int | None, str]:
@@ -340,19 +351,24 @@ class PdPlusController:
             nxt = MODE_TIME if self.time_driven else MODE_PATH
         return nxt, why
 
-    def set_path_profile(self, profile: PathProfile) -> str:
-        """Offer a theta-profile (theta-driven mode). ProfileError if it leaves the limits;
-        else it becomes the pending profile (see the module docstring)."""
-        return self._offer(profile)
+    def set_path_profile(self, profile: PathProfile, path: PathBase | None = None,
+                         tracker: PathTracker | None = None) -> str:
+        """Offer a theta-profile (theta-driven mode) on ``path`` (None: the configured path;
+        ``tracker``: a PathTracker of that path built elsewhere, to save building it here).
+        ProfileError if it leaves the limits; else it becomes the pending profile, and its
+        path the pending path (see the module docstring): enable switches to both at once."""
+        return self._offer(profile, path, tracker)
 
     def set_time_trajectory(self, traj: TimeTrajectory) -> str:
         """Offer a time trajectory (time-driven mode); as ``set_path_profile``."""
         return self._offer(traj)
 
-    def _offer(self, profile) -> str:
+    def _offer(self, profile, path=None, tracker=None) -> str:
         profile.check_limits(self.model, self.config.velocity_limit_fraction)
         _, why = self._transition(EV_PLAN)
         self.pending = profile
+        self.pending_path = self.base_path if path is None else path
+        self._pending_tracker = tracker
         return why
 
     @property
@@ -371,6 +387,9 @@ class PdPlusController:
             return False, 'no profile'
         if self.pending is not None:
             self.active, self.pending = self.pending, None
+            if self.pending_path is not self.path:
+                self._use_path(self.pending_path, self._pending_tracker)
+            self.pending_path = self._pending_tracker = None
         self._enable_requested = True
         self._in_flight.clear()
         self.stop_reason = ''

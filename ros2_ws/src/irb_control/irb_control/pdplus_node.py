@@ -13,6 +13,7 @@ answered.
 """
 from __future__ import annotations
 
+import gc
 import math
 import sys
 import threading
@@ -20,7 +21,9 @@ import time
 
 import numpy as np
 from irb_description.model import RobotModel
-from irb_description.node_main import declare, latched_qos, run_node, state_pub_qos, state_qos
+from irb_description.node_help import NodeSpec, Param, Topic
+from irb_description.node_main import (declare_params, latched_qos, run_node, state_pub_qos,
+                                       state_qos)
 from irb_description.path import CirclePath, load_path_file
 from irb_interfaces.msg import AxisStatus, ControllerState, PlanStatus
 from rclpy.node import Node
@@ -29,11 +32,112 @@ from std_srvs.srv import Trigger
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import declare_realtime, spin_with
+from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_switch_interval,
+                        spin_with)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
 from .profiles import ProfileError, TimeTrajectory, default_circle_profile, sine_trajectory
+
+
+_d = ControllerConfig()
+SPEC = NodeSpec(
+    'pdplus', 'irb_control',
+    'The theta-driven inverse-dynamics PD+ controller with friction feed-forward: answers each '
+    '/joint_states with a /torque_command (stamped with the state it answers). Plans arrive on '
+    '/planned_trajectory on the path they were planned on, are checked in a child process and '
+    'wait, pending, for ~/enable; the verdict goes out on ~/plan_status. Nothing moves '
+    'unless enabled; stops latch until ~/enable.',
+    params=(
+        Param('kp', list(_d.kp), 'N m/rad', 'proportional gains'),
+        Param('kd', list(_d.kd), 'N m s/rad', 'derivative gains'),
+        Param('period_s', _d.period_s, 's', 'sample period'),
+        Param('prediction_samples', _d.prediction_samples, 'samples', 'delay compensation'),
+        Param('delay_prediction', _d.delay_prediction, '', "q, qd over the delay: "
+              "'commanded' (with the accelerations of the commands in flight), 'reference' "
+              "(with qdd_ref at t + delta, the thesis), 'auto' (reference on the thesis "
+              "circle, else commanded)"),
+        Param('ramp_min_duration_s', _d.ramp_min_duration_s, 's', 'ramp to the start '
+              '(minimum; longer if the peak speed would exceed half the speed limit)'),
+        Param('friction_mode', 'nominal', '', "friction feed-forward: 'none', 'nominal', "
+              "'file'"),
+        Param('friction_map_file', '', '', "friction-map YAML for mode 'file'"),
+        Param('friction_blend_a', _d.friction_blend_a, 'rad/s', 'a of eq. 4.9'),
+        Param('torque_limit_nm', [0.0], 'N m', 'torque limits (3 values); [0.0] = the model '
+              'limits'),
+        Param('torque_rate_limit_nm_s', list(_d.torque_rate_limit_nm_s), 'N m/s',
+              'torque rate limits'),
+        Param('velocity_limit_fraction', _d.velocity_limit_fraction, '',
+              'safe stop above this fraction of the speed limits'),
+        Param('max_tracking_error_rad', list(_d.max_tracking_error_rad), 'rad',
+              'safe stop above this joint error'),
+        Param('theta_max_lead_rad', _d.theta_max_lead_rad, 'rad', 'progress governor lead; '
+              '0 = theta from the measurement only (thesis)'),
+        Param('reference_mode', 'theta', '', "'theta' (theta-driven) or 'time' (q(t))"),
+        Param('builtin_profile', 'circle', '', "used until a plan arrives: 'circle', 'sine' "
+              "or 'none' (no motion and no command until /planned_trajectory arrives)"),
+        Param('profile_duration_s', 10.0, 's', 'built-in circle: one circle in this time'),
+        Param('min_theta_dot', 0.05, 'rad/s', 'floor of h(theta)'),
+        Param('sine_joint', 1, '', 'built-in sine: joint 1..3'),
+        Param('sine_peak_speed_rad_s', 0.5, 'rad/s', 'built-in sine: peak speed'),
+        Param('sine_amplitude_rad', 0.3, 'rad', 'built-in sine: amplitude A of A(1 - cos wt)'),
+        Param('sine_cycles', 1.0, '', 'built-in sine: number of periods'),
+        Param('path_center', [0.6, 0.0, 0.13], 'm', 'circle centre (base_link)'),
+        Param('path_radius', 0.15, 'm', 'circle radius'),
+        Param('path_start_angle', 0.0, 'rad', 'circle start angle'),
+        Param('path_direction', 1, '', 'circle direction: +1 counter-clockwise, -1 clockwise'),
+        Param('path_file', '', '', "YAML path spec (irb_description.path.path_from_spec: "
+              "line, arc, polyline, spline, circle); '' = the circle of the path_* parameters. "
+              'The path of the built-in profile and of plans that carry no path of their '
+              'own (a plan from the planner carries its path)'),
+        Param('auto_enable', True, '', 'at start-up only: start moving once a profile '
+              'exists, the joint states have been steady for auto_enable_settle_s and '
+              'torque_command has a subscriber (once; later motions need ~/enable)'),
+        Param('auto_enable_settle_s', 0.25, 's', 'auto_enable: joint states without a gap of '
+              'more than 3 periods for this long first, and torque_command subscribed for '
+              'this long (real time only; 0 with use_sim_time)'),
+        Param('follow_sim_time', True, '', 'joint_states stamped in simulated time while '
+              '/clock is published (a simulator in lockstep or paced mode): switch to '
+              'use_sim_time:=true by itself (only while nothing moves)'),
+        Param('watchdog_missed_samples', 3, 'samples', 'safe stop after this many missing '
+              'samples'),
+        Param('watchdog_sim_time_timeout_s', 1.0, 's', 'minimum watchdog timeout with '
+              'use_sim_time (lockstep)'),
+        Param('deadline_s', 0.002, 's', 'a step slower than this counts as a missed '
+              'deadline'),
+        Param('future_tolerance_s', 0.005, 's', "joint states stamped further in the future "
+              "than this (against this node's clock) are refused"),
+        Param('max_plan_points', 20000, '', 'plans with more points are refused'),
+        Param('max_plan_acceleration_rad_s2', 50.0, 'rad/s^2', 'plans with a faster joint '
+              'acceleration are refused'),
+        Param('plan_torque_fraction', 0.9, '', 'plans whose feed-forward torque needs more '
+              'than this fraction of a torque limit are refused'),
+        Param('max_ramp_s', 10.0, 's', 'enable is refused when the ramp to the start would '
+              'take longer'),
+        Param('require_axis_status', True, '', 'enable only once the simulator or axis '
+              'bridge has reported its status on axis_status, and never while it reports an '
+              'error'),
+        Param('executor', 'events', '', "'events' (EventsExecutor, spin_once loop) or "
+              "'single'"),
+        *REALTIME_PARAMS),
+    subscribes=(
+        Topic('joint_states', 'sensor_msgs/JointState', 'q, qd of joint_1..3 (by name)'),
+        Topic('planned_trajectory', 'trajectory_msgs/JointTrajectory', 'plans (latched): '
+              'joints or [theta]; the path in header.frame_id (irb_description.plan_path)'),
+        Topic('axis_status', 'irb_interfaces/AxisStatus', 'the drives (simulator or bridge)')),
+    publishes=(
+        Topic('torque_command', 'sensor_msgs/JointState', 'effort [N m], header.stamp = the '
+              'answered state'),
+        Topic('controller_state', 'irb_interfaces/ControllerState', 'mode, refs, errors, '
+              'torques, every sample'),
+        Topic('~/plan_status', 'irb_interfaces/PlanStatus', 'verdict on the latest plan '
+              '(latched), by its stamp')),
+    services=(Topic('~/enable', 'std_srvs/Trigger', 'start: ramp to the (pending) profile; '
+                    'clears a latched stop'),
+              Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop')),
+    example='ros2 run irb_control pdplus\n'
+            'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none '
+            '-p auto_enable:=false')
 
 
 class PdPlusNode(Node):
@@ -43,69 +147,11 @@ class PdPlusNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__('pdplus', **kwargs)
-        d = ControllerConfig()
-        P = {}
-
-        def par(name, default, text):
-            P[name] = declare(self, name, default, text)
-        par('kp', list(d.kp), 'proportional gains [N m/rad]')
-        par('kd', list(d.kd), 'derivative gains [N m s/rad]')
-        par('period_s', d.period_s, 'sample period [s]')
-        par('prediction_samples', d.prediction_samples, 'delay compensation [samples]')
-        par('delay_prediction', d.delay_prediction, "q, qd over the delay: 'commanded' (with "
-            "the accelerations of the commands in flight), 'reference' (with qdd_ref at "
-            "t + delta, the thesis), 'auto' (reference on the thesis circle, else commanded)")
-        par('ramp_min_duration_s', d.ramp_min_duration_s, 'ramp to the start [s] (minimum)')
-        par('friction_mode', 'nominal', "friction feed-forward: 'none', 'nominal', 'file'")
-        par('friction_map_file', '', "friction-map YAML for mode 'file'")
-        par('friction_blend_a', d.friction_blend_a, 'a of eq. 4.9 [rad/s]')
-        par('torque_limit_nm', [0.0], 'torque limits [N m]; [0.0] = the model limits')
-        par('torque_rate_limit_nm_s', list(d.torque_rate_limit_nm_s), 'torque rate [N m/s]')
-        par('velocity_limit_fraction', d.velocity_limit_fraction,
-            'safe stop above this fraction of the speed limits [-]')
-        par('max_tracking_error_rad', list(d.max_tracking_error_rad),
-            'safe stop above this joint error [rad]')
-        par('theta_max_lead_rad', d.theta_max_lead_rad, 'progress governor lead [rad]; 0 = '
-            'theta from the measurement only (thesis)')
-        par('reference_mode', 'theta', "'theta' (theta-driven) or 'time' (q(t))")
-        par('builtin_profile', 'circle', "used until a plan arrives: 'circle', 'sine' or "
-            "'none' (no motion and no command until /planned_trajectory arrives)")
-        par('profile_duration_s', 10.0, 'built-in circle: one circle in this time [s]')
-        par('min_theta_dot', 0.05, 'floor of h(theta) [rad/s]')
-        par('sine_joint', 1, 'built-in sine: joint 1..3')
-        par('sine_peak_speed_rad_s', 0.5, 'built-in sine: peak speed [rad/s]')
-        par('sine_amplitude_rad', 0.3, 'built-in sine: amplitude A of A(1 - cos wt) [rad]')
-        par('sine_cycles', 1.0, 'built-in sine: number of periods')
-        par('path_center', [0.6, 0.0, 0.13], 'circle centre [m] (base_link)')
-        par('path_radius', 0.15, 'circle radius [m]')
-        par('path_start_angle', 0.0, 'circle start angle [rad]')
-        par('path_direction', 1, 'circle direction: +1 counter-clockwise, -1 clockwise')
-        par('path_file', '', "YAML path spec (irb_description.path.path_from_spec: type line, "
-            "arc, polyline, spline, circle, ...); '' = the circle of the path_* parameters")
-        par('auto_enable', True, 'at start-up only: start moving once a profile exists, the '
-            'joint states have been steady for auto_enable_settle_s and torque_command has a '
-            'subscriber (once; later motions need ~/enable)')
-        par('auto_enable_settle_s', 0.25, 'auto_enable: joint states without a gap of more than '
-            '3 periods for this long first, and torque_command subscribed for this long [s] '
-            '(real time only; 0 with use_sim_time)')
-        par('watchdog_missed_samples', 3, 'safe stop after this many missing samples')
-        par('watchdog_sim_time_timeout_s', 1.0, 'minimum watchdog timeout with use_sim_time '
-            '(lockstep) [s]')
-        par('deadline_s', 0.002, 'a step slower than this counts as a missed deadline [s]')
-        par('future_tolerance_s', 0.005, 'joint states stamped further in the future than this '
-            '(against this node\'s clock) are refused [s]')
-        par('max_plan_points', 20000, 'plans with more points are refused [-]')
-        par('max_plan_acceleration_rad_s2', 50.0, 'plans with a faster joint acceleration are '
-            'refused [rad/s^2]')
-        par('plan_torque_fraction', 0.9, 'plans whose feed-forward torque needs more than this '
-            'fraction of a torque limit are refused [-]')
-        par('max_ramp_s', 10.0, 'enable is refused when the ramp to the start would take '
-            'longer [s]')
-        par('require_axis_status', True, 'enable only once the simulator or axis bridge has '
-            'reported its status on axis_status, and never while it reports an error')
-        par('executor', 'events', "'events' (EventsExecutor, spin_once loop) or 'single'")
+        P = declare_params(self, [x for x in SPEC.params if x not in REALTIME_PARAMS])
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): main
         self.P = P
+        # log lines are written on a thread of their own (LogThread: 1-2 ms each in rclpy)
+        self.log = LogThread(lambda: self.get_logger())
         self.model = RobotModel.load()
         try:
             self.path = (load_path_file(P['path_file']) if P['path_file'] else
@@ -163,6 +209,7 @@ class PdPlusNode(Node):
         self._deadline_s = float(P['deadline_s'])
         self._future_s = float(P['future_tolerance_s'])
         self.rejected_stale = 0             # states too old or from the future
+        self._clock_probe_due = 0.0         # next look for a /clock publisher [steady s]
         self.axis: AxisStatus | None = None
         self.last_plan: dict | None = None  # the plan gate's latest outcome
         # one lock around every change of the controller: the step (control thread), the
@@ -225,7 +272,7 @@ class PdPlusNode(Node):
             sec, nanosec, names, position, velocity, _ = self._decoder.decode(data)
         except ValueError as exc:
             self.ctrl.step(math.nan, _NAN3, _NAN3)      # counted as a rejected input
-            self.get_logger().warn(f'joint_states refused: {exc}', throttle_duration_sec=1.0)
+            self.log.warn(f'joint_states refused: {exc}', throttle_s=1.0)
             return
         q, qd = self._select(names, position, velocity)
         self._last_q = q
@@ -241,15 +288,11 @@ class PdPlusNode(Node):
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
         # hot path (248 Hz): the command goes out first, bookkeeping and the state message after
         stamp = sec + nanosec * 1e-9
-        age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+        age = self._clock_s() - stamp
         if not -self._future_s <= age <= self.watchdog.timeout_s:
             # too old to answer (it waited somewhere longer than the watchdog limit) or from
             # the future: never answered, never counted as a deadline, the watchdog not fed
-            self.rejected_stale += 1
-            self.get_logger().warn(
-                f'joint_states stamped {stamp:.6f} s refused: '
-                + (f'{age * 1e3:.1f} ms old' if age > 0 else f'{-age * 1e3:.1f} ms in the '
-                   'future') + ' (clocks of the hosts?)', throttle_duration_sec=1.0)
+            self._refuse_stamp(stamp, age)
             return
         if self._auto_enable_pending:
             self._try_auto_enable(t_in)
@@ -284,14 +327,65 @@ class PdPlusNode(Node):
              out.tau_friction.tolist(), out.tau_feedback.tolist(), out.tau.tolist()),
             self.missed, self.ctrl.rejected_inputs + self.rejected_stale, dt))
 
+    def _refuse_stamp(self, stamp: float, age: float) -> None:
+        """A state too old or from the future: counted, and a hint that names the clocks.
+        A simulator in lockstep/paced mode stamps in simulated time (/clock, from 0): while
+        nothing moves, pdplus follows /clock by itself (use_sim_time) when it is published."""
+        self.rejected_stale += 1
+        sim_time = bool(self.get_parameter('use_sim_time').value)
+        state_sim = stamp < _SIM_EPOCH_S           # simulated time starts at 0, system ~1.8e9
+        now = time.monotonic()
+        if state_sim and not sim_time and now >= self._clock_probe_due:
+            self._clock_probe_due = now + 1.0
+            if self.count_publishers('/clock') > 0 and self.P['follow_sim_time'] and \
+                    self.ctrl.mode not in MOVING and self.ctrl.mode != MODE_HOLD:
+                self._use_sim_time()
+                return
+        old = f'{age * 1e3:.1f} ms old' if age > 0 else f'{-age * 1e3:.1f} ms in the future'
+        if state_sim and not sim_time:
+            hint = ('state stamped in simulated time (/clock) but pdplus uses the system '
+                    'clock: set use_sim_time:=true' + ('' if self.count_publishers('/clock')
+                                                       else ' (no /clock is published yet)'))
+        elif sim_time and not state_sim:
+            hint = ('state stamped in system time but pdplus uses simulated time (/clock'
+                    + (', none received yet' if self._clock_s() == 0.0 else '')
+                    + '): set use_sim_time:=false, or run the simulator in lockstep')
+        elif sim_time:
+            hint = ('both in simulated time (/clock): the state waited longer than the '
+                    'watchdog limit, or /clock and the states come from different simulators')
+        else:
+            hint = ('both in system time: the state waited longer than the watchdog limit '
+                    '(a stall of pdplus or of the network), or the system clocks of the hosts '
+                    'differ (synchronise them, e.g. chrony)')
+        self.log.warn(f'joint_states stamped {stamp:.6f} s refused: {old}; {hint}',
+                      throttle_s=1.0, key='stamp')
+
+    def _use_sim_time(self) -> None:
+        """Switch to simulated time (/clock), with the watchdog's simulated-time minimum and no
+        settle time, as if started with use_sim_time:=true (only while nothing moves)."""
+        from rclpy.parameter import Parameter
+        self.set_parameters([Parameter('use_sim_time', value=True)])
+        P, T = self.P, self.ctrl.config.period_s
+        self.watchdog = Watchdog(T, P['watchdog_missed_samples'],
+                                 P['watchdog_sim_time_timeout_s'])
+        self._settle = SettleGate(0.0, T)
+        self.log.info('joint_states are stamped in simulated time and /clock is '
+                               'published (a simulator in lockstep): pdplus now uses /clock '
+                               '(use_sim_time:=true)')
+
+    def _clock_s(self) -> float:
+        """The node's clock [s] (ROS time: system, or /clock with use_sim_time), against
+        which a state's age is judged."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _log_mode(self, was: int, mode: int, reason: str) -> None:
         # one call site per severity: rclpy refuses a severity change at the same site
         text = f'mode {MODE_NAMES[was]} -> {MODE_NAMES[mode]}' + (f': {reason}' if reason
                                                                  else '')
         if mode == MODE_STOPPED:
-            self.get_logger().error(text)
+            self.log.error(text)
         else:
-            self.get_logger().info(text)
+            self.log.info(text)
 
     def _try_auto_enable(self, now: float) -> None:
         """auto_enable (start-up only): enable once the joint states have arrived without a
@@ -301,8 +395,8 @@ class PdPlusNode(Node):
             return
         if self.pub_cmd.get_subscription_count() == 0:
             self._cmd_matched_at = None
-            self.get_logger().info('auto_enable: waiting for a subscriber of torque_command',
-                                   throttle_duration_sec=5.0)
+            self.log.info('auto_enable: waiting for a subscriber of torque_command',
+                          throttle_s=5.0)
             return
         # the writer sees the subscriber before the subscriber's side has matched this writer:
         # until then commands are dropped (a CI run: 4 commands of a whole ramp reached the
@@ -315,7 +409,7 @@ class PdPlusNode(Node):
         ok, text = self._enable()
         if ok or 'axis' not in text:          # waiting for the axis status keeps it pending
             self._auto_enable_pending = False
-        self.get_logger().info(f'auto_enable: {text}', throttle_duration_sec=5.0)
+        self.log.info(f'auto_enable: {text}', throttle_s=5.0, key='auto_enable')
 
     def _watch_loop(self) -> None:
         """The watchdog on a thread of its own: every half period, on the steady clock, the age
@@ -331,7 +425,7 @@ class PdPlusNode(Node):
                     if self.ctrl.mode == MODE_STOPPED:
                         continue
                     self.ctrl.stop(f'watchdog: no valid joint_states for {now - last:.4f} s')
-                self.get_logger().error(f'safe stop: {self.ctrl.stop_reason}')
+                self.log.error(f'safe stop: {self.ctrl.stop_reason}')
                 self._publish_stopped()
 
     def _publish_stopped(self) -> None:
@@ -348,13 +442,19 @@ class PdPlusNode(Node):
         waits for enable; or the reason it was refused. Either way ~/plan_status says so."""
         if result.get('ok'):
             try:
-                prof = profile_from_result(result)
-                if self.time_driven != isinstance(prof, TimeTrajectory):
+                if self.time_driven != (result['kind'] == 'time'):
                     raise ProfileError(f"{'time' if self.time_driven else 'theta'}-driven mode "
                                        f"cannot use a {result['kind']} profile")
+                # built in slices (no long hold of the interpreter lock: the control thread
+                # runs between them), then frozen for the garbage collector as at start-up
+                prof = profile_from_result(result, sliced=True)
+                gc.freeze()
                 with self._lock:
                     why = (self.ctrl.set_time_trajectory(prof) if self.time_driven
-                           else self.ctrl.set_path_profile(prof))
+                           else self.ctrl.set_path_profile(prof, result.get('path'),
+                                                           result.get('tracker')))
+                if result.get('path') is not None:
+                    why += f" (on its own {result.get('path_type', '')} path)"
             except ProfileError as exc:
                 result = dict(result, ok=False, reason=str(exc))
         sm = result.get('summary', {})
@@ -382,7 +482,7 @@ class PdPlusNode(Node):
         """The drives' status: an error while moving is a latched stop."""
         old, self.axis = self.axis, msg
         if msg.error and (old is None or not old.error):
-            self.get_logger().error(f'{msg.source}: error {msg.error:#x} ({msg.error_text}); '
+            self.log.error(f'{msg.source}: error {msg.error:#x} ({msg.error_text}); '
                                     'enable is refused until it is reset')
         if msg.error and self.ctrl.mode != MODE_STOPPED:
             with self._lock:
@@ -418,7 +518,7 @@ class PdPlusNode(Node):
     def on_enable(self, request, response):
         self._auto_enable_pending = False
         response.success, response.message = self._enable()
-        self.get_logger().info(f'enable: {response.message}')
+        self.log.info(f'enable: {response.message}')
         return response
 
     def on_stop(self, request, response):
@@ -427,10 +527,11 @@ class PdPlusNode(Node):
             self.ctrl.stop('stop service')
         self._publish_stopped()
         response.success, response.message = True, 'stopped (latched until enable)'
-        self.get_logger().warn('stop service: safe stop latched')
+        self.log.warn('stop service: safe stop latched')
         return response
 
     def destroy_node(self):
+        self.log.flush(2.0)
         self._closing.set()
         self.gate.stop()
         return super().destroy_node()
@@ -454,6 +555,8 @@ class PdPlusNode(Node):
 
 
 _NAN3 = (math.nan, math.nan, math.nan)
+#: stamps before this [s] are simulated time (/clock starts at 0), after it system time
+_SIM_EPOCH_S = 1.0e8
 
 
 def _joint_indices(names: tuple, joints: list[str]) -> tuple | None:
@@ -472,9 +575,10 @@ class PathConfigError(ValueError):
 
 
 def main(args=None):
+    short_switch_interval()
     try:
         run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
-                 args)
+                 args, spec=SPEC)
     except PathConfigError as exc:       # one line and exit 1, no traceback
         print(f'pdplus: {exc}', file=sys.stderr)
         sys.exit(1)

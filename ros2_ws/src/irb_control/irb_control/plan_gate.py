@@ -9,7 +9,8 @@ starts this gate as a child process (``python -m irb_control.plan_gate CONFIG``)
 to the plan topic with its own DDS participant, decodes, converts (trajectory_io), checks
 (plan_checks: size, consistency, limits, feed-forward torque) and writes each outcome to its
 stdout as one length-prefixed pickle: ``{'ok': True, 'kind': 'path'|'time', 'arrays': {...},
-'summary': {...}}`` or ``{'ok': False, 'reason': str}``. pdplus reads them on a thread of its
+'summary': {...}}`` (plus ``'path'`` and ``'tracker'`` objects when the plan carries the path
+it was planned on: irb_description.plan_path) or ``{'ok': False, 'reason': str}``. pdplus reads them on a thread of its
 own (a blocking read: no interpreter lock held while waiting), builds the (bounded) profile
 and offers it to the controller, which keeps it pending until enable.
 
@@ -123,11 +124,14 @@ def _feed_forward(model, friction):
     return ff
 
 
-def profile_from_result(result: dict):
-    """The controller's profile object from a gate result (in pdplus)."""
-    from .profiles import PathProfile, TimeTrajectory
+def profile_from_result(result: dict, sliced: bool = False):
+    """The controller's profile object from a gate result (in pdplus). ``sliced``: built in
+    small pieces that let other threads run in between (``profiles.build_sliced``): pdplus's
+    reader thread must not hold the interpreter lock for milliseconds while the control
+    thread waits for it."""
+    from .profiles import PathProfile, TimeTrajectory, build_sliced
     cls = TimeTrajectory if result['kind'] == 'time' else PathProfile
-    return cls(**result['arrays'])
+    return build_sliced(cls, result['arrays']) if sliced else cls(**result['arrays'])
 
 
 # --- the parent's side ----------------------------------------------------------------------
@@ -211,7 +215,9 @@ def main(argv=None) -> int:
     import rclpy
     from irb_description.model import RobotModel
     from irb_description.node_main import latched_qos
-    from irb_description.path import CirclePath, load_path_file
+    from irb_description.path import CirclePath, load_path_file, path_from_spec
+    from irb_description.path_tracking import PathTracker
+    from irb_description.plan_path import path_spec_from_frame_id
     from rclpy.executors import ExternalShutdownException
     from trajectory_msgs.msg import JointTrajectory
 
@@ -227,6 +233,7 @@ def main(argv=None) -> int:
     node = rclpy.create_node(cfg.node_name, namespace=cfg.namespace)
 
     def on_plan(msg: JointTrajectory):
+        spec = None
         try:
             n = len(msg.points)
             from .plan_checks import PlanLimits, check_size
@@ -241,12 +248,30 @@ def main(argv=None) -> int:
                 if len({len(r) for r in rows}) != 1 or len(rows[0]) < len(msg.joint_names):
                     raise PlanRejected(f'point {attr} lengths differ from joint_names')
                 return np.array(rows, float)
+            # the path the plan was planned on travels in header.frame_id (plan_path); a
+            # plan without one is on the configured path
+            spec = path_spec_from_frame_id(msg.header.frame_id)
+            try:
+                plan_path = path if spec is None else path_from_spec(spec)
+            except ValueError as exc:
+                raise PlanRejected(f"the plan's path is not valid: {exc}") from None
             result = check_message_arrays(list(msg.joint_names), t, column('positions'),
                                           column('velocities'), column('accelerations'),
-                                          model, path, cfg, friction)
+                                          model, plan_path, cfg, friction)
+            if spec is not None and result['kind'] == 'path':
+                # built here once (a spline's arc-length table took 0.8 s, a tracker 6-13 ms
+                # here): pdplus unpickles them in well under a millisecond
+                result['path'] = plan_path
+                result['tracker'] = (None if type(plan_path) is CirclePath
+                                     else PathTracker(plan_path))
+                result['path_type'] = spec.get('type', 'circle')
             result['ok'] = True
         except (PlanRejected, ProfileError, ValueError) as exc:
-            result = {'ok': False, 'reason': str(exc), 'points': len(msg.points)}
+            reason = str(exc)
+            if 'does not follow the path' in reason and spec is None:
+                reason += ("; the plan carries no path of its own (header.frame_id, as the "
+                           "planner sets it), so it must lie on pdplus's configured path")
+            result = {'ok': False, 'reason': reason, 'points': len(msg.points)}
         result['stamp'] = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         _write(result)
     node.create_subscription(JointTrajectory, cfg.topic, on_plan, latched_qos())

@@ -12,7 +12,10 @@
 """
 from __future__ import annotations
 
+import gc
 import math
+import threading
+import time
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
@@ -60,13 +63,18 @@ class PathProfile:
         if np.any(self.theta_dot <= 0):
             raise ProfileError('theta_dot = h(theta) must be > 0 (theta-driven control '
                                'stands still where it is 0)')
+        if not _SLICED.active:
+            self._finish(None, 0)
+
+    def _finish(self, pause, chunk: int) -> None:
         # one table for a single interpolation call per step: [theta_dot, theta_ddot, q, qd, qdd]
-        object.__setattr__(self, '_table', np.column_stack(
-            [self.theta_dot, self.theta_ddot, self.q, self.qd, self.qdd]))
-        _set_interp_cache(self, self.theta)
+        _set_table(self, (self.theta_dot, self.theta_ddot, self.q, self.qd, self.qdd), pause)
+        _set_interp_cache(self, self.theta, pause, chunk)
         thl, hl = self._xl, self._rows_l
-        object.__setattr__(self, '_h_slope', [(hl[i + 1][0] - hl[i][0]) / (thl[i + 1] - thl[i])
-                                              for i in range(n - 1)])
+        slope = []
+        for a, b in _ranges(len(thl) - 1, chunk, pause):
+            slope += [(hl[i + 1][0] - hl[i][0]) / (thl[i + 1] - thl[i]) for i in range(a, b)]
+        object.__setattr__(self, '_h_slope', slope)
 
     @property
     def theta_start(self) -> float:
@@ -136,8 +144,12 @@ class TimeTrajectory:
         _check_finite('trajectory', self.t, self.q, self.qd, self.qdd)
         if np.any(np.diff(self.t) <= 0):
             raise ProfileError('trajectory time must be strictly increasing')
-        object.__setattr__(self, '_table', np.column_stack([self.q, self.qd, self.qdd]))
-        _set_interp_cache(self, self.t)
+        if not _SLICED.active:
+            self._finish(None, 0)
+
+    def _finish(self, pause, chunk: int) -> None:
+        _set_table(self, (self.q, self.qd, self.qdd), pause)
+        _set_interp_cache(self, self.t, pause, chunk)
 
     @property
     def duration(self) -> float:
@@ -169,10 +181,77 @@ class TimeTrajectory:
             raise ProfileError('trajectory exceeds the speed limits')
 
 
-def _set_interp_cache(obj, grid: np.ndarray) -> None:
-    """Plain-float copies of the grid and the table rows for the per-step interpolation."""
-    object.__setattr__(obj, '_xl', np.asarray(grid, float).tolist())
-    object.__setattr__(obj, '_rows_l', obj._table.tolist())
+class _Sliced(threading.local):
+    active = False      # inside build_sliced: __post_init__ checks only, no tables
+
+
+_SLICED = _Sliced()
+
+
+def _ranges(n: int, chunk: int, pause):
+    """(a, b) slices of range(n), ``chunk`` long (0: one slice), ``pause()`` between them."""
+    if chunk <= 0 or pause is None:
+        yield 0, n
+        return
+    for a in range(0, n, chunk):
+        if a:
+            pause()
+        yield a, min(a + chunk, n)
+
+
+def _set_table(obj, columns, pause) -> None:
+    """``_table`` = np.column_stack(columns), column block by column block when ``pause``."""
+    if pause is None:
+        object.__setattr__(obj, '_table', np.column_stack(columns))
+        return
+    cols = [np.asarray(c, float).reshape(len(c), -1) for c in columns]
+    n = len(cols[0])
+    table = np.empty((n, sum(c.shape[1] for c in cols)))
+    for a in range(0, n, 1024):           # row blocks: the pages are first touched in pieces
+        pause()
+        table[a:a + 1024] = np.column_stack([c[a:a + 1024] for c in cols])
+    object.__setattr__(obj, '_table', table)
+
+
+def _set_interp_cache(obj, grid: np.ndarray, pause=None, chunk: int = 0) -> None:
+    """Plain-float copies of the grid and the table rows for the per-step interpolation
+    (``chunk`` rows at a time with ``pause()`` between them: see ``build_sliced``)."""
+    g = np.asarray(grid, float)
+    xl, rows = [], []
+    for a, b in _ranges(len(g), chunk, pause):
+        xl += g[a:b].tolist()
+        rows += obj._table[a:b].tolist()
+    object.__setattr__(obj, '_xl', xl)
+    object.__setattr__(obj, '_rows_l', rows)
+
+
+def _yield_gil() -> None:
+    time.sleep(0)        # releases the interpreter lock: a waiting thread runs now
+
+
+def build_sliced(cls, arrays: dict, chunk: int = 256, pause=_yield_gil):
+    """``cls(**arrays)`` (PathProfile or TimeTrajectory), the same object to the bit, built in
+    slices of ``chunk`` rows with ``pause()`` between them, for a thread that must not hold
+    the interpreter lock for long while another one runs a control loop: converting a
+    20 000-point table to the plain-float rows the step interpolates from holds it for
+    3-16 ms in one piece (several periods); in slices of 256 rows each piece is ~0.1-0.3 ms.
+    The cyclic garbage collector is held off meanwhile: the ~20 000 new row lists would set
+    off generation-1/2 collections that walk the heap with the lock held (8-27 ms measured);
+    collection resumes afterwards (pdplus then freezes the new objects, as it does at
+    start-up, so later collections do not walk them)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        _SLICED.active = True
+        try:
+            obj = cls(**arrays)           # the checks (vectorised), no tables
+        finally:
+            _SLICED.active = False
+        obj._finish(pause, chunk)
+    finally:
+        if was:
+            gc.enable()
+    return obj
 
 
 def _sample_list(obj, x: float, zero_rates_after_end: bool) -> list:
@@ -283,7 +362,8 @@ def profile_from_joint_trajectory(model: RobotModel, path: PathBase, t: np.ndarr
         off = float(np.max(np.linalg.norm(pts - path.point(np.clip(theta, 0, 2 * np.pi)),
                                           axis=1)))
     if off > 5e-3:
-        raise ProfileError('joint trajectory does not follow the configured path (> 5 mm)')
+        raise ProfileError(f'joint trajectory does not follow the path: its TCP is up to '
+                           f'{off * 1e3:.1f} mm from it (> 5 mm)')
     dp = path.d_point(theta)
     v = np.array([model.jacobian(qi) @ qdi for qi, qdi in zip(q, qd)])
     thd = np.einsum('ij,ij->i', dp, v) / np.einsum('ij,ij->i', dp, dp)

@@ -20,8 +20,9 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.electrical import BUS_MODES, load_electrical
 from irb_description.model import RobotModel
-from irb_description.node_main import (declare, latched_qos, run_node, running, state_pub_qos,
-                                       state_qos)
+from irb_description.node_help import NodeSpec, Param, Topic
+from irb_description.node_main import (declare_params, latched_qos, run_node, running,
+                                       state_pub_qos, state_qos)
 from irb_description.robot_state import six_joint_names, six_joints
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
@@ -32,7 +33,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
-from .node_util import apply_realtime, declare_realtime, make_executor
+from .node_util import (REALTIME_PARAMS, LogThread, apply_realtime, declare_realtime,
+                        fifo_refusal, make_executor, short_switch_interval)
 from .plant import (Plant, PlantConfig, config_path, default_plant_yaml,
                     load_plant_friction)
 from .plant_effects import load_plant_effects
@@ -47,56 +49,91 @@ def _seconds(stamp: Time) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+MODES = ('auto', 'realtime', 'paced', 'lockstep')
+_d = PlantConfig()
+SPEC = NodeSpec(
+    'simulator', 'irb_control',
+    'The simulated IRB 1600 (joints 1-3 actuated, 4-6 locked): publishes joint_states every '
+    'period and applies the torque_command answering the latest one; brakes and latched '
+    'errors as the axis computer. mode auto: real time on the steady clock where the host '
+    'grants SCHED_FIFO (realtime_priority > 0), else lockstep on /clock paced at 1x wall '
+    'clock (pdplus switches to /clock by itself).',
+    params=(
+        Param('mode', 'auto', '', "'auto' (realtime where realtime_priority is granted, else "
+              "paced), 'realtime' (one step per period on the steady clock, stamps = ROS "
+              "time), 'paced' (lockstep on /clock at lockstep_rate x wall clock: no deadline "
+              "can be missed) or 'lockstep' (as fast as the controller answers)"),
+        Param('lockstep_rate', 1.0, '', "paced: simulated seconds per wall-clock second"),
+        Param('period_s', _d.period_s, 's', 'sample period'),
+        Param('substeps', _d.substeps, '', 'integration substeps per period'),
+        Param('delay_samples', _d.delay_samples, 'samples', 'command-to-effect delay'),
+        Param('initial_positions', list(_d.initial_q), 'rad', 'start pose of joints 1-3 '
+              '(brakes on)'),
+        Param('command_timeout_s', _d.command_timeout_s, 's', 'once commanded, no command '
+              'answering the latest state for longer: brakes, error latched until ~/reset'),
+        Param('encoder_resolution_rad', _d.encoder_resolution_rad, 'rad', 'encoder quantum '
+              '(arm side)'),
+        Param('position_noise_rad', _d.position_noise_rad, 'rad', 'encoder noise std'),
+        Param('velocity_noise_rad_s', _d.velocity_noise_rad_s, 'rad/s', 'speed noise std'),
+        Param('camera_period_s', _d.camera_period_s, 's', 'camera sample period'),
+        Param('camera_noise_m', _d.camera_noise_m, 'm', 'camera noise std per axis'),
+        Param('seed', _d.seed, '', 'noise seed'),
+        Param('plant_friction_file', '', '', "plant friction YAML; '' = config/plant.yaml"),
+        Param('plant_effects_file', '', '', "YAML with an 'effects:' section; '' = the plant "
+              'friction file (no section: no effects)'),
+        Param('plant_electrical_file', '', '', "plant electrical parameters YAML ('' = "
+              "config/plant_electrical.yaml); 'none' = do not publish electrical_power"),
+        Param('status_period_s', 0.1, 's', 'axis_status at least this often (and on change)'),
+        Param('lockstep_wait_s', 0.5, 's', 'lockstep/paced: wall time to wait for the command '
+              'answering a state before stepping without it (3 such steps: brakes); below '
+              "pdplus's simulated-time watchdog (1 s)"),
+        Param('stats_path', '', '', "write loop statistics JSON here at exit ('' = no)"),
+        Param('stats_per_state', False, '', 'stats_path: also every state (steady-clock time '
+              'it went out, latency of its answer or null): the benchmarks\' windows'),
+        Param('executor', 'events', '', "'events' (EventsExecutor, lower latency) or "
+              "'single'"),
+        *REALTIME_PARAMS),
+    subscribes=(Topic('torque_command', 'sensor_msgs/JointState',
+                      'effort [N m] of joint_1..3, header.stamp = the answered state'),),
+    publishes=(
+        Topic('joint_states', 'sensor_msgs/JointState',
+              'q [rad], qd [rad/s], applied torque [N m], every period'),
+        Topic('electrical_power', 'sensor_msgs/JointState',
+              'per-axis and total DC-bus power [W] in effort, same stamp'),
+        Topic('camera/tcp', 'geometry_msgs/PointStamped', 'TCP [m], 100 Hz'),
+        Topic('axis_status', 'irb_interfaces/AxisStatus', 'drives: brakes, latched errors'),
+        Topic('/clock', 'rosgraph_msgs/Clock', 'simulated time (paced and lockstep)')),
+    services=(Topic('~/reset', 'std_srvs/Trigger', 'clear a latched error'),),
+    example='ros2 run irb_control simulator\n'
+            'ros2 run irb_control simulator --ros-args -p mode:=realtime -p '
+            'realtime_priority:=20')
+
+
 class SimulatorNode(Node):
     """Plant in a node; ``run()`` is its loop (real time on the steady clock, or lockstep)."""
 
     def __init__(self, **kwargs):
         super().__init__('simulator', **kwargs)
-        d = PlantConfig()
-        p = {
-            'mode': declare(self, 'mode', 'realtime', "'realtime' (steady clock) or "
-                            "'lockstep' (simulated time on /clock, waits for each command)"),
-            'period_s': declare(self, 'period_s', d.period_s, 'sample period [s]'),
-            'substeps': declare(self, 'substeps', d.substeps, 'integration substeps per period'),
-            'delay_samples': declare(self, 'delay_samples', d.delay_samples,
-                                     'command-to-effect delay [samples]'),
-            'initial_positions': declare(self, 'initial_positions', list(d.initial_q),
-                                         'start pose of joints 1-3 [rad]'),
-            'command_timeout_s': declare(self, 'command_timeout_s', d.command_timeout_s,
-                                         'no command for longer: brakes [s]'),
-            'encoder_resolution_rad': declare(self, 'encoder_resolution_rad',
-                                              d.encoder_resolution_rad, 'quantum [rad]'),
-            'position_noise_rad': declare(self, 'position_noise_rad', d.position_noise_rad,
-                                          'encoder noise std [rad]'),
-            'velocity_noise_rad_s': declare(self, 'velocity_noise_rad_s',
-                                            d.velocity_noise_rad_s, 'speed noise std [rad/s]'),
-            'camera_period_s': declare(self, 'camera_period_s', d.camera_period_s,
-                                       'camera sample period [s]'),
-            'camera_noise_m': declare(self, 'camera_noise_m', d.camera_noise_m,
-                                      'camera noise std per axis [m]'),
-            'seed': declare(self, 'seed', d.seed, 'noise seed'),
-            'plant_friction_file': declare(self, 'plant_friction_file', '',
-                                           "plant friction YAML; '' = config/plant.yaml"),
-            'plant_effects_file': declare(self, 'plant_effects_file', '',
-                                          "YAML with an 'effects:' section; '' = the plant "
-                                          'friction file (no section: no effects)'),
-            'status_period_s': declare(self, 'status_period_s', 0.1,
-                                       'axis_status at least this often (and on change) [s]'),
-            'lockstep_wait_s': declare(self, 'lockstep_wait_s', 0.05,
-                                       'lockstep: wall time to wait for a command [s]'),
-            'stats_path': declare(self, 'stats_path', '',
-                                  "write loop statistics JSON here at exit ('' = no)"),
-            'executor': declare(self, 'executor', 'events',
-                                "'events' (EventsExecutor, lower latency) or 'single'"),
-            'plant_electrical_file': declare(
-                self, 'plant_electrical_file', '',
-                "plant electrical parameters YAML ('' = config/plant_electrical.yaml); "
-                "'none' = do not publish electrical_power"),
-        }
+        p = declare_params(self, [x for x in SPEC.params if x not in REALTIME_PARAMS])
         self.realtime = declare_realtime(self)       # (priority, cpus, latency): _spin
         self.p = p
-        if p['mode'] not in ('realtime', 'lockstep'):
-            raise ValueError(f"mode must be 'realtime' or 'lockstep', not {p['mode']!r}")
+        self.log = LogThread(lambda: self.get_logger())      # lines of the hot path
+        if p['mode'] not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, not {p['mode']!r}")
+        if not p['lockstep_rate'] > 0:
+            raise ValueError(f"lockstep_rate must be > 0, not {p['lockstep_rate']}")
+        self.mode = p['mode']
+        if self.mode == 'auto':
+            # the real-time loop only where the host schedules it in time: without SCHED_FIFO
+            # a 2-core machine at load 1.3 latched a watchdog stop 1.3 s after enabling
+            why = fifo_refusal(self.realtime[0])
+            self.mode = 'realtime' if not why else 'paced'
+            if why:
+                self.get_logger().info(
+                    f'mode auto: no real-time priority ({why}): simulated time on /clock, '
+                    f"paced at {p['lockstep_rate']:g}x wall clock, every state answered "
+                    '(pdplus follows /clock by itself); real time: -p mode:=realtime -p '
+                    'realtime_priority:=20')
         model = RobotModel.load()
         self.joint_names = model.joint_names
         ffile = p['plant_friction_file'] or str(default_plant_yaml())
@@ -111,7 +148,7 @@ class SimulatorNode(Node):
             seed=p['seed'])
         effects = load_plant_effects(p['plant_effects_file'] or ffile)
         self.plant = Plant(model, friction, self.config, effects)
-        self.lockstep = p['mode'] == 'lockstep'
+        self.lockstep = self.mode in ('lockstep', 'paced')
         efile = p['plant_electrical_file'] or str(config_path('plant_electrical.yaml'))
         self.electrical = (None if efile == 'none'
                            else load_electrical(Path(efile)).axes(len(self.joint_names)))
@@ -138,6 +175,8 @@ class SimulatorNode(Node):
         self._effort_idx: list | None = None     # ... and the indices of joints 1-3 in it
         # loop statistics: state publish time per stamp, latency of the matching command
         self._sent: dict[int, float] = {}
+        self._newest_key: int | None = None
+        self._per_state = [] if p['stats_per_state'] and p['stats_path'] else None
         self._answered_k = -1
         self._k = 0
         self.latencies: list[float] = []
@@ -148,7 +187,7 @@ class SimulatorNode(Node):
         self.max_missed_run = 0
         self.t_wall0 = time.monotonic()
         self.get_logger().info(
-            f"simulator: {p['mode']}, T = {p['period_s']} s, {p['substeps']} substeps, delay "
+            f"simulator: {self.mode}, T = {p['period_s']} s, {p['substeps']} substeps, delay "
             f"{p['delay_samples']} samples, plant friction {ffile}, effects "
             f"{effects.names() or 'none'}")
 
@@ -175,15 +214,25 @@ class SimulatorNode(Node):
             self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
                                    throttle_duration_sec=1.0)
             return
-        t_sent = self._sent.pop(sec * 1_000_000_000 + nanosec, None)
+        key = sec * 1_000_000_000 + nanosec
+        t_sent = self._sent.pop(key, None)
         if t_sent is None:
             # not the answer to the latest state (as the axis computer, which applies only
             # the command carrying the current cycle's sequence number): a late or stale
-            # command never acts on the robot
+            # command never acts on the robot (a pdplus frozen and resumed answers old states)
             self.stale_commands += 1
+            newest = self._newest_key
+            self.log.warn(
+                f'torque_command refused ({self.stale_commands} so far): it answers the state '
+                f'stamped {sec}.{nanosec:09d}, '
+                + (f'{(newest - key) * 1e-6:.1f} ms older than the newest state sent'
+                   if newest is not None and key < newest else 'not the newest state sent'),
+                throttle_s=1.0, key='stale')
             return
         self.plant.command(tau)
         self.latencies.append(now - t_sent)
+        if self._per_state:
+            self._per_state[-1][1] = round((now - t_sent) * 1e3, 4)
         self._answered_k = self._k
 
     def _effort(self, names: tuple, effort) -> np.ndarray | None:
@@ -228,6 +277,9 @@ class SimulatorNode(Node):
         data = self._state_enc.encode(sec, nanosec, *six_joints(y.q, y.qd, y.tau))
         key = sec * 1_000_000_000 + nanosec
         self._sent = {key: time.monotonic()}      # only the latest state can be answered
+        self._newest_key = key
+        if self._per_state is not None:
+            self._per_state.append([self._sent[key], None])
         self.pub_state.publish(data)
         if self.pub_power is not None:
             e, qd = self.electrical, self.plant.state.qd
@@ -264,6 +316,8 @@ class SimulatorNode(Node):
         """Loop until shutdown."""
         T = self.config.period_s
         if self.lockstep:
+            paced, rate = self.mode == 'paced', self.p['lockstep_rate']
+            wall0 = time.monotonic() - self.plant.state.t / rate
             while running(self.context):
                 t = self.plant.state.t
                 stamp = _stamp(t)
@@ -279,6 +333,12 @@ class SimulatorNode(Node):
                 self.plant.step()
                 self._k += 1
                 self._after_step(_stamp)
+                if paced:       # simulated time runs at lockstep_rate x the wall clock
+                    due = wall0 + self.plant.state.t / rate
+                    if time.monotonic() - due > 0.1:         # fell behind: no sprint after
+                        wall0 = time.monotonic() - self.plant.state.t / rate
+                    while running(self.context) and time.monotonic() < due:
+                        executor.spin_once(timeout_sec=due - time.monotonic())
             return
         t0_ros = self.get_clock().now().nanoseconds * 1e-9
         next_tick = time.monotonic()
@@ -315,7 +375,7 @@ class SimulatorNode(Node):
     def stats(self) -> dict:
         lat = np.array(self.latencies) * 1e3
         q = (lambda p: float(np.percentile(lat, p))) if lat.size else (lambda p: math.nan)
-        return {'mode': self.p['mode'], 'steps': self._k, 'answered': int(lat.size),
+        return {'mode': self.mode, 'steps': self._k, 'answered': int(lat.size),
                 'latency_ms': {'p50': q(50), 'p99': q(99), 'max': float(lat.max())
                                if lat.size else math.nan},
                 'missed_deadlines': self.missed, 'max_consecutive_missed': self.max_missed_run,
@@ -323,7 +383,9 @@ class SimulatorNode(Node):
                 'state_publish_late_ms': _percentiles(np.array(self.tick_late) * 1e3),
                 'sim_time_s': self.plant.state.t,
                 'wall_time_s': time.monotonic() - self.t_wall0,
-                'energy_j': self.plant.state.energy}
+                'energy_j': self.plant.state.energy,
+                **({'per_state_monotonic_s_latency_ms': self._per_state}
+                   if self._per_state is not None else {})}
 
 
 def _percentiles(x: np.ndarray) -> dict | None:
@@ -359,7 +421,8 @@ def _spin(node: SimulatorNode) -> None:
 
 
 def main(args=None):
-    run_node(SimulatorNode, _spin, args)
+    short_switch_interval()
+    run_node(SimulatorNode, _spin, args, spec=SPEC)
 
 
 if __name__ == '__main__':

@@ -145,7 +145,7 @@ def _stall_once(retries):
     # the subject is pdplus's own stall detection (its limits unchanged); the simulator's
     # command timeout is 10 cycles so that platform jitter before the freeze does not latch it
     sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
-                            '-p', 'command_timeout_s:=0.04032'],
+                            '-p', 'mode:=realtime', '-p', 'command_timeout_s:=0.04032'],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     # pdplus's watchdog at 10 samples (40 ms): with 3, a platform stall during the ramp

@@ -15,13 +15,20 @@
 optional ``process`` block holds the process constraints (irb_description.path
 ``process_from_spec``); the --tcp-* options override its values.
 
+When a controller listens (a node publishes ``irb_interfaces/PlanStatus``, as pdplus does on
+``~/plan_status``), ``plan`` waits for its verdict on this plan (matched by the plan's stamp)
+and prints it: pdplus checks the plan on the path it was planned on and keeps it pending for
+``~/enable``. With no controller it only prints the plan, as before.
+
 Exit code 0 on success, 1 if the planner refused (its error code and message are printed),
-2 if the service did not answer.
+2 if the service did not answer, 3 if a controller refused the plan (its reason is printed),
+4 if a controller listens but gave no verdict within ``--verdict-timeout``.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 import numpy as np
 import rclpy
@@ -71,6 +78,12 @@ def parse_args(argv):
     p.add_argument('--service', default='plan_path')
     p.add_argument('--timeout', type=float, default=120.0, help='[s]')
     p.add_argument('--plot', default='plan.png', help="PNG path, '' = no plot")
+    p.add_argument('--verdict-timeout', type=float, default=30.0,
+                   help='[s] wait this long for the verdict of a listening controller '
+                        '(pdplus ~/plan_status); 0 = do not wait')
+    p.add_argument('--plan-status', default='',
+                   help="the controller's PlanStatus topic to wait on (e.g. "
+                        "/pdplus/plan_status); '' = every one in the graph")
     return p.parse_args(argv)
 
 
@@ -150,6 +163,65 @@ def summary(resp: PlanPath.Response) -> str:
     return '\n'.join(lines)
 
 
+PLAN_STATUS_TYPE = 'irb_interfaces/msg/PlanStatus'
+#: how long to look for a listening controller before printing the plan as before [s]
+DISCOVERY_GRACE_S = 1.0
+
+
+def wait_for_verdict(stamp, timeout: float, context=None, only: str = '') -> int:
+    """The verdict of every controller that publishes a PlanStatus (``only``: on that topic)
+    on the plan of ``stamp`` (builtin_interfaces/Time): 0 when all accepted it or no
+    controller listens, 3 when one refused it (its reason printed), 4 when one gave no
+    verdict within ``timeout`` [s]."""
+    from irb_description.node_main import latched_qos
+    from irb_interfaces.msg import PlanStatus
+    from rclpy.executors import SingleThreadedExecutor
+    node = rclpy.create_node('plan_cli_verdict', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        def listening():
+            return sorted(name for name, types in node.get_topic_names_and_types()
+                          if PLAN_STATUS_TYPE in types and node.count_publishers(name) > 0
+                          and (not only or name == only))
+        topics = listening()
+        grace = time.monotonic() + DISCOVERY_GRACE_S      # a controller just discovered
+        while not topics and time.monotonic() < grace:
+            executor.spin_once(timeout_sec=0.05)
+            topics = listening()
+        if not topics:
+            print('no controller listens (no plan_status): the plan is published only')
+            return 0
+        key = (stamp.sec, stamp.nanosec)
+        verdicts = {}
+
+        def on_status(topic, msg):
+            if (msg.plan_stamp.sec, msg.plan_stamp.nanosec) == key:
+                verdicts[topic] = msg
+        for topic in topics:
+            node.create_subscription(PlanStatus, topic,
+                                     lambda m, t=topic: on_status(t, m), latched_qos())
+        deadline = time.monotonic() + timeout
+        while len(verdicts) < len(topics) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0.0)))
+        refused = missing = False
+        for topic in topics:
+            v = verdicts.get(topic)
+            if v is None:
+                print(f'{topic}: no verdict on this plan within {timeout:g} s', file=sys.stderr)
+                missing = True
+            elif v.accepted:
+                print(f'{topic}: plan accepted ({v.points} points, {v.duration:.3f} s); it '
+                      'starts on enable')
+            else:
+                print(f'{topic}: plan refused: {v.reason}', file=sys.stderr)
+                refused = True
+        return 3 if refused else 4 if missing else 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
 def main(args=None):
     argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
     a = parse_args(argv)
@@ -174,7 +246,10 @@ def main(args=None):
                             tau, f'{a.objective}: {resp.duration:.2f} s, {resp.energy:.1f} J '
                             f'(trapezoid {resp.baseline_energy:.1f} J)')
             print(f'plot: {out}')
-        return 0
+        if a.verdict_timeout <= 0:
+            return 0
+        return wait_for_verdict(resp.trajectory.header.stamp, a.verdict_timeout,
+                                only=a.plan_status)
     return call_service(PlanPath, a.service, request, a.timeout, 'plan_cli', answered, args)
 
 

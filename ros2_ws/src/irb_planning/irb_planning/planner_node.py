@@ -24,6 +24,7 @@ import traceback
 
 import numpy as np
 from irb_description.node_main import run_node, spin_until_signal
+from irb_description.plan_path import path_frame_id
 from irb_interfaces.msg import PathSpec
 from irb_interfaces.srv import PlaceTask, PlanPath
 from rcl_interfaces.msg import ParameterDescriptor
@@ -186,6 +187,9 @@ class PlannerNode(Node):
         # names the plan it is about; for a joint-trajectory controller a stamp of 'now' means
         # 'start now', as a zero stamp does
         response.trajectory.header.stamp = self.get_clock().now().to_msg()
+        # the path the plan was planned on travels with it (irb_description.plan_path): the
+        # controller follows the plan on that path, whatever path it was started with
+        response.trajectory.header.frame_id = path_frame_id(result.request.path_spec())
         self.pub_traj.publish(response.trajectory)
         self.pub_theta.publish(messages.theta_profile_msg(result))
         self.pub_path.publish(messages.path_msg(result.request))
