@@ -153,6 +153,10 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
                 note += ' (use --method samples to fit every sample instead)'
             results.append(replace(sw, method='sweep', warnings=[note] + list(sw.warnings)))
             continue
+        still = _not_moved(series_list, j, joints, config.samples)
+        if still:
+            results.append(JointResult(j, [], method='samples', error=still))
+            continue
         why = ('forced by --method samples' if config.method == 'samples' else
                f'not sweeps (holds {sw.hold_time_s if sw else 0:.1f} s of {moving:.1f} s '
                'moving)')
@@ -189,6 +193,23 @@ def _v_min(series_list: list[JointSeries], joint: str, config: SampleFitConfig) 
     sample_fit.resolve_v_min), over all series."""
     v = np.concatenate([s.velocity[:, s.names.index(joint)] for s in series_list])
     return resolve_v_min(v, config)[0]
+
+
+def _not_moved(series_list: list[JointSeries], joint: str, joints: list[str],
+               config: SampleFitConfig) -> str | None:
+    """Why ``joint`` did not move on its own (its top speed below v_min_fraction x the
+    fastest selected joint's: carried by the others' motion, noise), or None."""
+    tops = {}
+    for n in joints:
+        v = np.abs(np.concatenate([s.velocity[:, s.names.index(n)] for s in series_list]))
+        v = v[np.isfinite(v)]
+        tops[n] = float(np.quantile(v, config.top_quantile)) if len(v) else 0.0
+    fastest = max(tops, key=tops.get)
+    if tops[joint] < config.v_min_fraction * tops[fastest]:
+        return (f'{joint}: not moved on its own: top speed {tops[joint]:.3g} rad/s is below '
+                f'{config.v_min_fraction:g} x that of {fastest} ({tops[fastest]:.3g} rad/s); '
+                f'select it alone (--joints {joint}) to fit it anyway')
+    return None
 
 
 def _moving_time(s: JointSeries, joint: str, v_min: float) -> float:

@@ -409,8 +409,7 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     total = _Stats(vbar, w_bin * plain.n, w_bin * plain.sy, float(w_bin @ syy.sum(axis=0)))
     train = [_Stats(vbar, w_bin * (plain.n - cnt[f]), w_bin * (plain.sy - sy[f]),
                     float(w_bin @ (syy.sum(axis=0) - syy[f]))) for f in range(k)]
-    held = [_Stats(vbar, w_bin * cnt[f], w_bin * sy[f], float(w_bin @ syy[f]))
-            for f in range(k)]
+    held = [_Stats(vbar, cnt[f], sy[f], float(syy[f].sum())) for f in range(k)]   # plain
     v_lo, v_hi = _support(kbin, nb, N, lo_edge, top_edge)
     # candidates: held-out RMS over the folds, then the fit on everything -----------------
     models = [m for m in config.models if m in CANDIDATES
