@@ -21,8 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from irb_description.friction import JointFriction
 
-from .friction_fit import (FitConfig, IdentificationError, JointResult, choose_order,
-                           fit_polynomial, identify_series)
+from .friction_fit import FitConfig, IdentificationError, JointResult, identify_series
 from .sample_fit import (SampleFitConfig, SampleFitError, binned_means, fit_samples,
                          resolve_v_min)
 from .series import JointSeries

@@ -26,9 +26,17 @@ Candidates (nested, cheapest first): ``coulomb_viscous`` (F_c, F_v), ``offset`` 
 same as per-sign levels without Stribeck), ``stribeck`` (+ h, v_s), ``asymmetric_stribeck``
 (+ a), and ``polynomials`` (one polynomial of order 5-7 per sign, least squares). The model is
 chosen by k-fold held-out RMS over time blocks (every ``folds``-th block of ``block_s`` held
-out in turn): the simplest candidate within ``select_tol`` of the best held-out RMS. Without
+out in turn): the simplest candidate whose held-out squared error exceeds the best one's by
+at most 2 standard errors of the paired per-fold differences (or ``select_tol``). Without
 polynomials chosen the map is the parametric model alone; with them, the polynomials inside
 the valid range and the best parametric candidate outside it.
+
+Weights (``weights='speed_variance'``, default): 1 / the residual variance of each (sign,
+log-speed bin) of a first plain fit, clipped to 0.1..10 x the median (noisier speed ranges
+such as transients count less), so the problem is a weighted bounded least-squares one. Guard:
+if the weighted optimum's plain RMS exceeds the plain bounded optimum's by more than
+``plain_guard`` (1 %), the plain one is used (said in ``notes``); ``weights='none'`` fits
+plain least squares. Held-out scores are plain RMS either way.
 
 Everything runs on sufficient statistics over fine log-speed bins (count, sum of torque and of
 its square per (fold, sign, bin); the model varies by far less than the noise inside a bin of
@@ -90,7 +98,9 @@ class SampleFitConfig:
     worse_ratio [-]: a bounded optimum whose RMS exceeds the unbounded one's by more is
     refused (degenerate); models: candidates tried (subset of CANDIDATES); poly_orders:
     polynomial orders tried; vs_grid: log-spaced v_s values of the scan; stribeck: False
-    leaves out the Stribeck candidates."""
+    leaves out the Stribeck candidates; weights: 'speed_variance' or 'none' (module
+    docstring); variance_bins: (sign, log-speed) bins of the variance weights; plain_guard
+    [-]: largest plain-RMS excess of the weighted optimum over the plain one."""
 
     v_min: float = 0.0
     v_min_fraction: float = 0.02
