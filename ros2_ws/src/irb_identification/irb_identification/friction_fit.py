@@ -125,8 +125,8 @@ def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> Par
             idx = np.array([0, 3])[free]
             cov[np.ix_(idx, idx)] = c2
             q = stats.t.ppf(0.975, dof)
-            ci = {k: float(q * np.sqrt(c2[i, i]))
-                  for i, k in enumerate(np.array(['coulomb', 'viscous'])[free])}
+            keys = [k for k, f in zip(('coulomb', 'viscous'), free) if f]
+            ci = {k: float(q * np.sqrt(c2[i, i])) for i, k in enumerate(keys)}
         return ParametricFit(float(sol[0]), float(sol[0]), 0.05, float(sol[1]), ci, rmse, dof,
                              None)
     if len(v) < 5:

@@ -337,9 +337,10 @@ def resolve_v_min(v: np.ndarray, config: SampleFitConfig) -> tuple[float, str]:
                  f'quantile of |v|; floor v_min = {config.v_min:g} rad/s)')
 
 
-def _support(kbin, nb, N, lo_edge, top_edge) -> tuple[float, float]:
-    """The 0.5 % and 99.5 % quantiles of the speeds used [rad/s] (from the fine bins)."""
-    c_speed = np.cumsum(np.bincount(kbin % nb, minlength=nb))
+def _support(counts, nb, N, lo_edge, top_edge) -> tuple[float, float]:
+    """The 0.5 % and 99.5 % quantiles of the speeds used [rad/s] from the counts (2 nb,)
+    of the fine bins (both signs)."""
+    c_speed = np.cumsum(counts[:nb] + counts[nb:])
     edges = lo_edge * np.exp(np.arange(nb + 1) * np.log(top_edge / lo_edge) / nb)
     v_lo = float(edges[np.searchsorted(c_speed, 0.005 * N)])
     v_hi = float(edges[min(np.searchsorted(c_speed, 0.995 * N) + 1, nb)])
@@ -396,6 +397,7 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     sv = np.bincount(key, v, minlength=k * 2 * nb).reshape(k, 2 * nb)
     sy = np.bincount(key, y, minlength=k * 2 * nb).reshape(k, 2 * nb)
     syy = np.bincount(key, y * y, minlength=k * 2 * nb).reshape(k, 2 * nb)
+    v_lo, v_hi = _support(cnt.sum(axis=0), nb, N, lo_edge, top_edge)
     occ = cnt.sum(axis=0) > 0
     cnt, sv, sy, syy = cnt[:, occ], sv[:, occ], sy[:, occ], syy[:, occ]
     vbar = sv.sum(axis=0) / cnt.sum(axis=0)
@@ -403,8 +405,8 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     w_bin = np.ones(len(vbar))
     if config.weights == 'speed_variance':
         # 1 / residual variance of the (sign, coarse log-speed bin) of a first plain fit
-        x0, vs0, _ = _fit_model(plain, *MODELS['asymmetric_stribeck'], *_support(
-            kbin, nb, N, lo_edge, top_edge), config.vs_grid)
+        x0, vs0, _ = _fit_model(plain, *MODELS['asymmetric_stribeck'], v_lo, v_hi,
+                                config.vs_grid)
         m0 = _model_values(vbar, x0, vs0)
         sse_b = syy.sum(axis=0) - 2 * m0 * plain.sy + plain.n * m0 * m0
         coarse = (np.flatnonzero(occ) * config.variance_bins) // nb
@@ -420,7 +422,6 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     train = [_Stats(vbar, w_bin * (plain.n - cnt[f]), w_bin * (plain.sy - sy[f]),
                     float(w_bin @ (syy.sum(axis=0) - syy[f]))) for f in range(k)]
     held = [_Stats(vbar, cnt[f], sy[f], float(syy[f].sum())) for f in range(k)]   # plain
-    v_lo, v_hi = _support(kbin, nb, N, lo_edge, top_edge)
     # candidates: held-out RMS over the folds, then the fit on everything -----------------
     models = [m for m in config.models if m in CANDIDATES
               and (config.stribeck or m not in ('stribeck', 'asymmetric_stribeck'))]
@@ -556,10 +557,15 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     A = (J_bins * total.n) @ J_bins.T
     G = np.empty((n_blocks, q))
     wr = r if w_sample is None else w_sample * r
-    for i, c in enumerate(free):
-        G[:, i] = np.bincount(blocks, _columns(v, vs, [c])[0] * wr, minlength=n_blocks)
+    sg = np.sign(v)
+    e = np.exp(-np.square(v / vs)) if strib else None
+    for i, c in enumerate(free):         # score columns, as in _columns
+        col = {0: lambda: None, 1: lambda: sg, 2: lambda: sg * e, 3: lambda: v,
+               4: lambda: 1.0 - e}[c]()
+        G[:, i] = np.bincount(blocks, wr if col is None else col * wr, minlength=n_blocks)
     if with_vs:
-        G[:, -1] = np.bincount(blocks, dvs(v) * wr, minlength=n_blocks)
+        G[:, -1] = np.bincount(blocks, (x[2] * sg - x[4]) * e * 2 * v * v / vs**3 * wr,
+                               minlength=n_blocks)
     B = G.T @ G * n_blocks / max(n_blocks - 1, 1)
     cov6 = np.zeros((6, 6))
     try:
