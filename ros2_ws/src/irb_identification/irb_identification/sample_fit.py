@@ -33,7 +33,8 @@ the valid range and the best parametric candidate outside it.
 
 Weights (``weights='speed_variance'``, default): 1 / the residual variance of each (sign,
 log-speed bin) of a first plain fit, clipped to 0.1..10 x the median (noisier speed ranges
-such as transients count less), so the problem is a weighted bounded least-squares one. Guard:
+count less), times Huber weights (k = 2 robust scales) of that fit's residuals (spikes,
+transients hardly count): a weighted bounded least-squares problem. Guard:
 if the weighted optimum's plain RMS exceeds the plain bounded optimum's by more than
 ``plain_guard`` (1 %), the plain one is used (said in ``notes``); ``weights='none'`` fits
 plain least squares. Held-out scores are plain RMS either way.
@@ -99,7 +100,8 @@ class SampleFitConfig:
     refused (degenerate); models: candidates tried (subset of CANDIDATES); poly_orders:
     polynomial orders tried; vs_grid: log-spaced v_s values of the scan; stribeck: False
     leaves out the Stribeck candidates; weights: 'speed_variance' or 'none' (module
-    docstring); variance_bins: (sign, log-speed) bins of the variance weights; plain_guard
+    docstring); variance_bins: (sign, log-speed) bins of the variance weights; huber_k [-]:
+    Huber threshold in robust scales (1.4826 MAD) of those weights (inf = none); plain_guard
     [-]: largest plain-RMS excess of the weighted optimum over the plain one."""
 
     v_min: float = 0.0
@@ -118,6 +120,7 @@ class SampleFitConfig:
     stribeck: bool = True
     weights: str = 'speed_variance'
     variance_bins: int = 48
+    huber_k: float = 2.0
     plain_guard: float = 0.01
 
 
@@ -403,24 +406,46 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     vbar = sv.sum(axis=0) / cnt.sum(axis=0)
     plain = _Stats(vbar, cnt.sum(axis=0), sy.sum(axis=0), float(syy.sum()))
     w_bin = np.ones(len(vbar))
+    h = None                                       # Huber weights per sample
+    ac, ay, ayy = cnt, sy, syy                     # (weighted) statistics per (fold, bin)
     if config.weights == 'speed_variance':
-        # 1 / residual variance of the (sign, coarse log-speed bin) of a first plain fit
+        # 1 / residual variance of the (sign, coarse log-speed bin) of a first plain fit,
+        # times Huber weights of its residuals (spikes, transients hardly count)
         x0, vs0, _ = _fit_model(plain, *MODELS['asymmetric_stribeck'], v_lo, v_hi,
                                 config.vs_grid)
         m0 = _model_values(vbar, x0, vs0)
-        sse_b = syy.sum(axis=0) - 2 * m0 * plain.sy + plain.n * m0 * m0
+        if np.isfinite(config.huber_k):
+            r0 = y - _model_values(v, x0, vs0)
+            rs = r0[::max(1, N // 200_000)]
+            scale = 1.4826 * float(np.median(np.abs(rs - np.median(rs)))) + 1e-12
+            h = np.minimum(1.0, config.huber_k * scale / np.maximum(np.abs(r0), 1e-300))
+            del r0
+            size = k * 2 * nb
+            ac = np.bincount(key, h, minlength=size).reshape(k, 2 * nb)[:, occ]
+            hy = h * y
+            ay = np.bincount(key, hy, minlength=size).reshape(k, 2 * nb)[:, occ]
+            ayy = np.bincount(key, hy * y, minlength=size).reshape(k, 2 * nb)[:, occ]
+            del hy
+            down = int(np.count_nonzero(h < 0.5))
+            if down:
+                notes.append(f'{down} of {N} samples weighted below 1/2 as outliers (Huber, '
+                             f'k = {config.huber_k:g} robust scales of {scale:.3g} N m)')
+        n_b = ac.sum(axis=0)
+        sse_b = ayy.sum(axis=0) - 2 * m0 * ay.sum(axis=0) + n_b * m0 * m0
         coarse = (np.flatnonzero(occ) * config.variance_bins) // nb
-        n_c = np.bincount(coarse, plain.n)
-        var_c = np.bincount(coarse, sse_b) / np.maximum(n_c, 1)
+        n_c = np.bincount(coarse, n_b)
+        var_c = np.bincount(coarse, sse_b) / np.maximum(n_c, 1e-12)
         var_c = np.clip(var_c, *(np.median(var_c[n_c > 0]) * np.array([0.1, 10.0]))
                         + 1e-300)
         w_bin = 1.0 / var_c[coarse]
-        w_bin /= (w_bin @ plain.n) / N
+        w_bin /= (w_bin @ n_b) / N
         notes.append('weights: 1 / the residual variance of each (sign, log-speed bin) '
-                     f'({config.variance_bins // 2} bins per sign) of a first plain fit')
-    total = _Stats(vbar, w_bin * plain.n, w_bin * plain.sy, float(w_bin @ syy.sum(axis=0)))
-    train = [_Stats(vbar, w_bin * (plain.n - cnt[f]), w_bin * (plain.sy - sy[f]),
-                    float(w_bin @ (syy.sum(axis=0) - syy[f]))) for f in range(k)]
+                     f'({config.variance_bins // 2} bins per sign) of a first plain fit'
+                     + (', times Huber weights' if h is not None else ''))
+    A_n, A_y, A_yy = ac.sum(axis=0), ay.sum(axis=0), ayy.sum(axis=0)
+    total = _Stats(vbar, w_bin * A_n, w_bin * A_y, float(w_bin @ A_yy))
+    train = [_Stats(vbar, w_bin * (A_n - ac[f]), w_bin * (A_y - ay[f]),
+                    float(w_bin @ (A_yy - ayy[f]))) for f in range(k)]
     held = [_Stats(vbar, cnt[f], sy[f], float(syy[f].sum())) for f in range(k)]   # plain
     # candidates: held-out RMS over the folds, then the fit on everything -----------------
     models = [m for m in config.models if m in CANDIDATES
@@ -493,7 +518,7 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
             x, vs, cost, total = xp, vsp, cost_p, plain
         else:
             pos = np.cumsum(occ) - 1
-            w_sample = w_bin[pos[kbin]]
+            w_sample = w_bin[pos[kbin]] if h is None else w_bin[pos[kbin]] * h
     if not strib:
         notes.append('without a Stribeck term the offset and the Coulomb asymmetry cannot '
                      'be told apart: offset set to 0, the levels per sign carry both')
