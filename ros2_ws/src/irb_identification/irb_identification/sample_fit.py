@@ -572,12 +572,10 @@ def fit_samples(t: np.ndarray, v: np.ndarray, tau_f: np.ndarray, name: str = 'jo
     free = [c for c in cols if not (LOWER_ZERO[c] and x[c] == 0.0)]
     with_vs = strib and not active_vs(active)
     J_bins = _columns(vbar, vs, free) if free else np.zeros((0, len(vbar)))
-    dvs = None
-    if with_vs:
-        def dvs(vv):     # d tau_f / d v_s = (h sign(v) - a) e 2 v^2 / v_s^3
-            e = np.exp(-np.square(vv / vs))
-            return (x[2] * np.sign(vv) - x[4]) * e * 2 * vv * vv / vs**3
-        J_bins = np.vstack([J_bins, dvs(vbar)])
+    if with_vs:          # d tau_f / d v_s = (h sign(v) - a) e 2 v^2 / v_s^3
+        eb = np.exp(-np.square(vbar / vs))
+        J_bins = np.vstack([J_bins, (x[2] * np.sign(vbar) - x[4]) * eb * 2 * vbar**2
+                            / vs**3])
     q = J_bins.shape[0]
     A = (J_bins * total.n) @ J_bins.T
     G = np.empty((n_blocks, q))
