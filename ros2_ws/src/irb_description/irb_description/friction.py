@@ -30,6 +30,9 @@ function of joint speed v [rad/s] (thesis ch. 4). File schema (YAML, version 1):
           # unless allow_degenerate=True)
           degenerate: true
           degenerate_reason: 'stribeck_velocity 3.6 rad/s beyond the top speed 0.09 rad/s'
+          # optional (identify, samples method): the model chosen by held-out error, every
+          # candidate's score, v_min and its rule, bounded vs unbounded RMS; not used by loaders
+          fit: {model: asymmetric_stribeck, candidates: {...}, v_min: 0.02, ...}
 
 Parametric model, with e = exp(-(v / v_s)^2):
 
@@ -73,6 +76,7 @@ class JointFriction:
     static_negative: float | None = None      # None = static - coulomb + coulomb_negative
     offset: float = 0.0
     degenerate_reason: str = ''               # '' = a trusted fit (or not identified at all)
+    fit_report: dict = field(default_factory=dict)   # how the fit chose its model (identify)
 
     def __post_init__(self):
         if self.coulomb_positive is None:
@@ -204,6 +208,8 @@ class FrictionMap:
                 d['ci95'] = {k: float(v) for k, v in j.ci95.items()}
             if j.degenerate:
                 d.update(degenerate=True, degenerate_reason=j.degenerate_reason)
+            if j.fit_report:
+                d['fit'] = _plain(j.fit_report)
             joints[name] = d
         return {'friction_map': {'version': SCHEMA_VERSION, 'source': self.source,
                                  'joints': joints}}
@@ -211,6 +217,21 @@ class FrictionMap:
     def save(self, path: str | Path) -> None:
         """Write the map as YAML (schema in the module docstring)."""
         Path(path).write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+
+
+def _plain(x):
+    """numpy scalars and tuples inside a report -> YAML-safe Python types."""
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x)
+    return x
 
 
 class FrictionMapError(ValueError):
@@ -244,7 +265,8 @@ def _joint_from_dict(name: str, d: dict, allow_degenerate: bool = False) -> Join
             static_positive=(float(d['static_positive']) if 'static_positive' in d else None),
             static_negative=(float(d['static_negative']) if 'static_negative' in d else None),
             degenerate_reason=(str(d.get('degenerate_reason') or 'degenerate')
-                               if d.get('degenerate') else ''))
+                               if d.get('degenerate') else ''),
+            fit_report=dict(d.get('fit') or {}))
     except (KeyError, TypeError, ValueError) as exc:
         raise FrictionMapError(f'joint {name}: bad or missing field ({exc})') from exc
     values = [jf.coulomb, jf.static, jf.stribeck_velocity, jf.viscous, jf.coulomb_positive,

@@ -15,7 +15,7 @@ import numpy as np
 from irb_description.friction import FrictionMap, JointFriction
 from numpy.polynomial import Polynomial
 from scipy import stats
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from .segments import (Rejection, SegmentConfig, SpeedPoint, find_segments, rolling_mean_std,
                        speed_points)
@@ -103,25 +103,30 @@ def _parametric(v, fc, ds, vs, fv):
 def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> ParametricFit:
     """Coulomb + viscous + Stribeck fit to signed speeds v (m,) [rad/s], tau_f (m,) [N m].
 
-    Least squares in x = (F_c, F_s - F_c, v_s, F_v) with F_c, F_s - F_c >= 0 and
-    v_s in [1e-3, 10] rad/s; multi-start over v_s. Covariance s^2 (J^T J)^-1.
-    ``stribeck`` False: Coulomb + viscous only (linear least squares, F_s = F_c).
+    Least squares in x = (F_c, F_s - F_c, v_s, F_v) with F_c, F_s - F_c, F_v >= 0 and
+    v_s in [1e-3, 10] rad/s (the physically valid optimum, never a negative coefficient);
+    multi-start over v_s. Covariance s^2 (J^T J)^-1 of the parameters off their bounds.
+    ``stribeck`` False: Coulomb + viscous only (bounded linear least squares, F_s = F_c).
     """
     v, tau = np.asarray(v, float), np.asarray(tau, float)
     if not stribeck:
         if len(v) < 3:
             raise IdentificationError(f'{len(v)} points are too few for a 2-parameter fit')
         X = np.column_stack([np.sign(v), v])
-        sol, *_ = np.linalg.lstsq(X, tau, rcond=None)
+        sol = lsq_linear(X, tau, bounds=(0.0, np.inf)).x          # F_c, F_v >= 0
         dof = len(v) - 2
         rmse = float(np.sqrt(np.sum((tau - X @ sol) ** 2) / max(dof, 1)))
         cov = np.full((4, 4), np.nan)
         ci = {}
-        if dof > 0:
-            c2 = np.linalg.inv(X.T @ X) * rmse**2
-            cov[np.ix_([0, 3], [0, 3])] = c2
+        free = sol > 0                     # a coefficient on its bound has no interval
+        if dof > 0 and free.any():
+            Xf = X[:, free]
+            c2 = np.linalg.inv(Xf.T @ Xf) * rmse**2
+            idx = np.array([0, 3])[free]
+            cov[np.ix_(idx, idx)] = c2
             q = stats.t.ppf(0.975, dof)
-            ci = {'coulomb': float(q * np.sqrt(c2[0, 0])), 'viscous': float(q * np.sqrt(c2[1, 1]))}
+            keys = [k for k, f in zip(('coulomb', 'viscous'), free) if f]
+            ci = {k: float(q * np.sqrt(c2[i, i])) for i, k in enumerate(keys)}
         return ParametricFit(float(sol[0]), float(sol[0]), 0.05, float(sol[1]), ci, rmse, dof,
                              None)
     if len(v) < 5:
@@ -138,7 +143,7 @@ def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> Par
     best = None
     for vs0 in (0.01, 0.05, 0.2, 0.5):
         x0 = [fc0, ds0, vs0, fv0]
-        r = least_squares(resid, x0, bounds=([0, 0, 1e-3, -np.inf], [np.inf, np.inf, 10, np.inf]),
+        r = least_squares(resid, x0, bounds=([0, 0, 1e-3, 0], [np.inf, np.inf, 10, np.inf]),
                           x_scale=[max(fc0, 1.0), max(ds0, 1.0), vs0, max(fv0, 1.0)])
         if best is None or r.cost < best.cost:
             best = r

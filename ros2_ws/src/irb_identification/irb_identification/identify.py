@@ -57,8 +57,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--map-joint', action='append', default=[], metavar='BAG_NAME:NAME',
                    help="rename a bag joint (e.g. onto the model's joint_2, for total torque "
                    'and for maps the controller loads); repeatable')
-    p.add_argument('--v-min', type=float, default=0.01,
-                   help='[rad/s] samples slower are not used by the samples method')
+    p.add_argument('--v-min', type=float, default=0.0,
+                   help='[rad/s] samples method: absolute floor of the slowest sample used '
+                   '(default 0: only --v-min-fraction)')
+    p.add_argument('--v-min-fraction', type=float, default=0.02,
+                   help='samples method: samples slower than this fraction of the top speed '
+                   '(99.9 %% quantile of |v|) are not used (the report says what was used)')
     p.add_argument('--poly-order', type=int, default=7, choices=(0, 5, 6, 7),
                    help='polynomial order per sign, 0 = pick 5-7 by leave-one-out')
     p.add_argument('--min-speeds', type=int, default=4, help='fewest speeds per joint (sweep)')
@@ -159,7 +163,8 @@ def main(args=None) -> int:
         fit=FitConfig(poly_order=opts.poly_order, min_speeds=opts.min_speeds,
                       segments=SegmentConfig(effort_lag_s=opts.effort_lag_s,
                                              split_gap_s=gaps.split_s())),
-        samples=SampleFitConfig(v_min=opts.v_min), gaps=gaps)
+        samples=SampleFitConfig(v_min=opts.v_min, v_min_fraction=opts.v_min_fraction),
+        gaps=gaps)
     joints = [j.strip() for j in opts.joints.split(',') if j.strip()]
     try:
         series, checks = check_gaps(series, bags_read, gaps, opts.topic)

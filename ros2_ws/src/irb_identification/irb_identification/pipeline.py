@@ -21,10 +21,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from irb_description.friction import JointFriction
 
+from .friction_fit import FitConfig, IdentificationError, JointResult, identify_series
 from .gaps import GapConfig, GapError, check_series
-from .friction_fit import (FitConfig, IdentificationError, JointResult, choose_order,
-                           fit_polynomial, identify_series)
-from .sample_fit import SampleFitConfig, SampleFitError, binned_means, fit_samples
+from .sample_fit import (SampleFitConfig, SampleFitError, binned_means, fit_samples,
+                         resolve_v_min)
 from .series import JointSeries
 
 METHODS = ('auto', 'sweep', 'samples')
@@ -172,7 +172,8 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
     results = []
     tau_f_cache = {}
     for j in joints:
-        moving = sum(_moving_time(s, j, config.samples.v_min) for s in series_list)
+        v_min_j = _v_min(series_list, j, config.samples)
+        moving = sum(_moving_time(s, j, v_min_j) for s in series_list)
         sw = sweep.get(j)
         # sweeps: the holds are most of the motion (then eq. 4.8's answer, or its error,
         # e.g. too few speeds, stands: a fit on the ramps between holds is no better)
@@ -184,6 +185,10 @@ def identify_joints(series_list: list[JointSeries], labels: list[str], torque_ki
             if sw.error and config.method == 'auto':
                 note += ' (use --method samples to fit every sample instead)'
             results.append(replace(sw, method='sweep', warnings=[note] + list(sw.warnings)))
+            continue
+        still = _not_moved(series_list, j, joints, config.samples)
+        if still:
+            results.append(JointResult(j, [], method='samples', error=still))
             continue
         why = ('forced by --method samples' if config.method == 'samples' else
                f'not sweeps (holds {sw.hold_time_s if sw else 0:.1f} s of {moving:.1f} s '
@@ -239,6 +244,30 @@ def check_gaps(series_list: list[JointSeries], labels: list[str], gaps: GapConfi
     return out, checks
 
 
+def _v_min(series_list: list[JointSeries], joint: str, config: SampleFitConfig) -> float:
+    """The slowest speed the samples method uses for ``joint`` (relative to its top speed,
+    sample_fit.resolve_v_min), over all series."""
+    v = np.concatenate([s.velocity[:, s.names.index(joint)] for s in series_list])
+    return resolve_v_min(v, config)[0]
+
+
+def _not_moved(series_list: list[JointSeries], joint: str, joints: list[str],
+               config: SampleFitConfig) -> str | None:
+    """Why ``joint`` did not move on its own (its top speed below v_min_fraction x the
+    fastest selected joint's: carried by the others' motion, noise), or None."""
+    tops = {}
+    for n in joints:
+        v = np.abs(np.concatenate([s.velocity[:, s.names.index(n)] for s in series_list]))
+        v = v[np.isfinite(v)]
+        tops[n] = float(np.quantile(v, config.top_quantile)) if len(v) else 0.0
+    fastest = max(tops, key=tops.get)
+    if tops[joint] < config.v_min_fraction * tops[fastest]:
+        return (f'{joint}: not moved on its own: top speed {tops[joint]:.3g} rad/s is below '
+                f'{config.v_min_fraction:g} x that of {fastest} ({tops[fastest]:.3g} rad/s); '
+                f'select it alone (--joints {joint}) to fit it anyway')
+    return None
+
+
 def _moving_time(s: JointSeries, joint: str, v_min: float) -> float:
     col = s.names.index(joint)
     if len(s.t) < 2:
@@ -267,7 +296,8 @@ def _friction_torques(series_list, accelerations, model, config, progress) -> di
                 qdd = acceleration(s.t, qd, config.accel_window_s, split)
         else:
             qdd = acceleration(s.t, qd, config.accel_window_s, split)
-        rows = np.any(np.abs(qd) >= config.samples.v_min, axis=1)
+        floor = np.array([_v_min(series_list, n, config.samples) for n in model.joint_names])
+        rows = np.any((np.abs(qd) >= floor) & (qd != 0), axis=1)
         if acc is None:
             short = acceleration(s.t, qd, config.accel_check_window_s, split)
             steady = np.all(np.abs(short - qdd) <= config.accel_tolerance
@@ -294,31 +324,11 @@ def _sample_result(name: str, fit, v: np.ndarray, f: np.ndarray, config: Pipelin
                    why: str) -> JointResult:
     warnings = [f'{name}: method samples ({why}): {fit.samples} samples, {fit.blocks} '
                 'time blocks for the intervals'] + [f'{name}: {n}' for n in fit.notes]
-    vb, fb = binned_means(v, f, config.samples.v_min)
-    pos, neg = vb > 0, vb < 0
-    poly_p = poly_n = None
-    op = choose_order(vb[pos], fb[pos], config.fit.poly_order)
-    on = choose_order(vb[neg], fb[neg], config.fit.poly_order)
-    if op and on and np.all(fb[pos] != 0) and np.all(fb[neg] != 0):
-        poly_p = tuple(float(c) for c in fit_polynomial(vb[pos], fb[pos], op))
-        poly_n = tuple(float(c) for c in fit_polynomial(vb[neg], fb[neg], on))
-        # a polynomial in v cannot follow a Stribeck dip over a wide log-speed range and
-        # swings between the bins: kept only if it stays within 5 % (+ 0.05 N m) of the
-        # parametric fit over the whole valid range (it replaces it there in the map)
-        lo, hi = fit.valid_range
-        grid = np.geomspace(lo, hi, 400)
-        worst = 0.0
-        for coef, vv in ((poly_p, grid), (poly_n, -grid)):
-            ref = fit.torque(vv)
-            dev = np.abs(np.polynomial.polynomial.polyval(vv, coef) - ref)
-            worst = max(worst, float(np.max(dev / (0.05 * np.abs(ref) + 0.05))))
-        if worst > 1.0:
-            warnings.append(f'{name}: the per-sign polynomials leave the parametric fit by '
-                            f'{worst:.1f} x the 5 % band within the valid range: parametric '
-                            'model only')
-            poly_p = poly_n = None
-    else:
-        warnings.append(f'{name}: too few speed bins for polynomials: parametric model only')
+    vb, fb = binned_means(v, f, fit.v_min)
+    poly_p, poly_n = fit.poly_positive, fit.poly_negative
+    if poly_p is None:
+        warnings.append(f'{name}: model {fit.model} chosen over per-sign polynomials by '
+                        'held-out error: parametric model only')
     s_ok = fit.stribeck_identified
     jf = JointFriction(
         coulomb=fit.coulomb, static=fit.static if s_ok else fit.coulomb,
@@ -328,7 +338,7 @@ def _sample_result(name: str, fit, v: np.ndarray, f: np.ndarray, config: Pipelin
         coulomb_positive=fit.coulomb_positive, coulomb_negative=fit.coulomb_negative,
         static_positive=fit.static if s_ok else None,
         static_negative=fit.static if s_ok else None, offset=fit.offset,
-        degenerate_reason='; '.join(fit.problems))
+        degenerate_reason='; '.join(fit.problems), fit_report=fit.report())
     return JointResult(name, [], friction=jf, warnings=warnings, method='samples', sample=fit,
                        degenerate=list(fit.problems), binned=(vb, fb))
 
@@ -355,7 +365,7 @@ def report_entry(r: JointResult) -> dict:
             viscous=fit.viscous, ci95=fit.ci95, rmse=fit.rmse,
             rmse_symmetric_no_offset=fit.rmse_symmetric, samples=fit.samples,
             blocks=fit.blocks, stribeck_identified=fit.stribeck_identified,
-            offset_identified=fit.offset_identified)
+            offset_identified=fit.offset_identified, fit=fit.report())
     if r.friction is not None:
         entry['valid_range'] = list(r.friction.valid_range)
     return entry
@@ -370,9 +380,10 @@ def summary_line(r: JointResult) -> str:
 
     def pm(key, val, unit):
         return f'{val:.4g} ± {ci[key]:.2g} {unit}' if key in ci else f'{val:.4g} {unit}'
-    text = (f'{r.name} [{r.method}]: F_c+ {pm("coulomb_positive", j.coulomb_positive, "N m")}'
+    method = r.method + (f', {r.sample.model}' if r.sample is not None else '')
+    text = (f'{r.name} [{method}]: F_c+ {pm("coulomb_positive", j.coulomb_positive, "N m")}'
             f', F_c- {pm("coulomb_negative", j.coulomb_negative, "N m")}, '
-            if not j.symmetric else f'{r.name} [{r.method}]: F_c '
+            if not j.symmetric else f'{r.name} [{method}]: F_c '
             f'{pm("coulomb", j.coulomb, "N m")}, ')
     text += (f'F_s {pm("static", j.static, "N m")}, v_s '
              f'{pm("stribeck_velocity", j.stribeck_velocity, "rad/s")}, ' if j.static != j.coulomb

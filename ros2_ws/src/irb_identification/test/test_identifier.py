@@ -157,7 +157,9 @@ def test_stream_core_bad_inputs(tmp_path, model):
     for k, d in enumerate(still):
         c.add(d, int(t_ns[k]), 0.0)
     out = c.compute('quiet')
-    assert not out.ok and 'axis: 0 samples above v_min = 0.01 rad/s' in out.error
+    # v_min is relative to the top speed (0 here): the line says so
+    assert not out.ok and 'axis: 0 samples above v_min = 0 rad/s' in out.error
+    assert '0.02 x the top speed 0 rad/s' in out.error
     assert '|v| seen: 0..0 rad/s' in out.report['joints']['axis']['error']
     # NaN samples are left out and counted; the rest identifies
     bad = v.copy()

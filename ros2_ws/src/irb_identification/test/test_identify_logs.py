@@ -168,7 +168,10 @@ def test_cli_degenerate_fit_never_exits_0(tmp_path, rng, capsys):
     assert 'DEGENERATE' in capsys.readouterr().out
 
 
-def test_cli_no_motion_above_v_min_writes_the_json(tmp_path, rng, capsys):
+def test_cli_slow_log_gets_a_map_and_an_absolute_floor_refuses(tmp_path, rng, capsys):
+    """Top speed 0.003 rad/s (issue 27: with the old absolute v_min = 0.01 rad/s no map):
+    v_min is relative to the top speed by default and the report says which was used; an
+    absolute floor above the data refuses with the joint, the threshold and the speeds."""
     t = np.cumsum(rng.uniform(1e-3, 13e-3, 2000))
     v = 0.003 * np.sin(t)
     src = _csv(tmp_path / 'l.csv', t, {'q': v, 'qd': v, 'tf': truth_torque(v)})
@@ -177,12 +180,23 @@ def test_cli_no_motion_above_v_min_writes_the_json(tmp_path, rng, capsys):
                             '--joint', 'slow:q:qd:tf']) == 0
     rep = tmp_path / 'r.json'
     assert identify.main(['--bag', str(bag), '--out', str(tmp_path / 'm.yaml'), '--json',
-                          str(rep), '--no-plots']) == 1
+                          str(rep), '--no-plots']) == 0
+    entry = json.loads(rep.read_text())['joints']['slow']
+    assert entry['fit']['v_min'] == pytest.approx(0.02 * 0.003, rel=0.01)
+    assert 'top speed' in entry['fit']['v_min_rule']
+    j = load_friction_map(tmp_path / 'm.yaml').joints[0]
+    lo, hi = j.valid_range
+    vv = np.geomspace(lo, hi, 50)
+    vv = np.r_[vv, -vv]
+    np.testing.assert_allclose(j.torque(vv), truth_torque(vv), atol=0.01)
+    capsys.readouterr()
+    assert identify.main(['--bag', str(bag), '--out', str(tmp_path / 'm2.yaml'), '--json',
+                          str(rep), '--no-plots', '--v-min', '0.01']) == 1
     err = capsys.readouterr()
     assert 'slow: 0 samples above v_min = 0.01 rad/s' in err.out + err.err
     report = json.loads(rep.read_text())
     assert report['exit_code'] == 1 and 'v_min' in report['joints']['slow']['error']
-    assert not (tmp_path / 'm.yaml').exists()
+    assert not (tmp_path / 'm2.yaml').exists()
 
 
 def test_total_torque_through_the_model_with_mapped_names(tmp_path, rng, model):
