@@ -116,8 +116,12 @@ if [ "$MODE" = wheels ]; then
 fi
 log "colcon build (ros2_ws)"
 cd "$ROOT/ros2_ws"
+# ros2_ws/src/tf2_msgs stands in for the standard tf2_msgs, which PyPI lacks; a real ROS 2 has
+# the whole package (tf2_ros needs its other interfaces), so the stand-in must not hide it
+SKIP=()
+if [ "$MODE" = system ]; then SKIP=(--packages-skip tf2_msgs); fi
 build() {
-  colcon build --symlink-install --event-handlers console_cohesion- summary+ \
+  colcon build --symlink-install --event-handlers console_cohesion- summary+ "${SKIP[@]}" \
     --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF > "$ROOT/ros2_ws/build.log" 2>&1
 }
 if ! build; then
