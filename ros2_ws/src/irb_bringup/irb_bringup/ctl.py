@@ -7,8 +7,10 @@
     ros2 run irb_bringup ctl reset      # clear the drive's latched error (simulator or
                                         # axis_bridge ~/reset; pdplus's ~/reset if it has one)
     ros2 run irb_bringup ctl hold       # pdplus ~/hold, where pdplus offers it
-    ros2 run irb_bringup ctl wait hold  # until pdplus is in that mode (a motion ended in
-                                        # hold); exit 1 with the reason if it stops
+    ros2 run irb_bringup ctl enable --wait   # enable, then wait until the motion it started
+                                        # has ended (hold or idle); exit 1 if pdplus stops
+    ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (a resting mode, idle
+                                        # or hold, after a motion); exit 1 if it stops
 
 Exit codes: 0 done; 1 refused by the node (its message is printed); 2 node or service not
 there, or no answer within --timeout. Every wait is bounded. The text and the rates come from
@@ -46,6 +48,12 @@ def parse_args(argv):
     p.add_argument('--timeout', type=float, default=10.0,
                    help='longest wait for the node and for each answer [s] (default: 10; '
                    'wait: for the mode)')
+    p.add_argument('--wait', action='store_true',
+                   help='enable: then follow /controller_state until the motion ends (hold '
+                   'or idle; exit 1 with the reason if pdplus stops); bounded by '
+                   '--motion-timeout')
+    p.add_argument('--motion-timeout', type=float, default=300.0,
+                   help='enable --wait: longest wait for the motion to end [s] (default: 300)')
     p.add_argument('--window', type=float, default=1.0,
                    help='status: how long the topic rates are measured [s] (default: 1)')
     return p.parse_args(argv)
@@ -216,6 +224,8 @@ def trigger(a, ros_args) -> int:
     s = _Session(ros_args)
     try:
         seen, services, drives = _discover(s, a.pdplus, a.timeout, _ready(a.command))
+        if a.command == 'enable' and a.wait and seen and 'enable' in services:
+            return _enable_and_wait(s, a)
     finally:
         s.close()
     pdplus = core.join_name(*core.split_node(a.pdplus))
@@ -246,49 +256,95 @@ def trigger(a, ros_args) -> int:
     return worst
 
 
+class _ModeFollower:
+    """The ``wait_outcome`` of pdplus's /controller_state, message by message."""
+
+    def __init__(self, session, pdplus: str, target: str):
+        from irb_bringup import ctl_core as core
+        from irb_interfaces.msg import ControllerState
+        from rclpy.qos import qos_profile_sensor_data
+        self.core, self.target = core, target
+        self.moving, self.code, self.mode, self.reason = False, None, None, ''
+        ns, _ = core.split_node(pdplus)
+        self.sub = session.node.create_subscription(
+            ControllerState, core.join_name(ns, 'controller_state'), self.on_state,
+            qos_profile_sensor_data)
+
+    def on_state(self, msg):
+        from irb_control.pd_plus import MODE_NAMES
+        if self.code is not None:
+            return
+        name = MODE_NAMES.get(msg.mode, str(msg.mode))
+        if name not in self.core.RESTING:
+            self.moving = True
+        self.mode, self.reason = name, msg.stop_reason
+        self.code = self.core.wait_outcome(self.target, msg.mode, msg.stop_reason,
+                                           self.moving)
+
+    def verdict(self, timeout: float) -> int:
+        core = self.core
+        if self.code == core.OK:
+            print(f'pdplus: {self.target}')
+            return core.OK
+        if self.code == core.REFUSED:
+            print(f'pdplus stopped: {self.reason or "(no reason given)"} '
+                  '(ctl status; ctl enable to go on)', file=sys.stderr)
+            return core.REFUSED
+        seen = f'last mode {self.mode}' if self.mode else 'no /controller_state'
+        print(f'wait {self.target}: not reached within {timeout:g} s ({seen})',
+              file=sys.stderr)
+        return core.UNAVAILABLE
+
+
+def _enable_and_wait(s, a) -> int:
+    """enable --wait: follow /controller_state from before the call, so a short motion cannot
+    end before the wait begins; done when pdplus rests again (hold, or idle) after moving."""
+    from irb_bringup import ctl_core as core
+    from std_srvs.srv import Trigger
+    pdplus = core.join_name(*core.split_node(a.pdplus))
+    follow = {'hold': _ModeFollower(s, a.pdplus, 'hold'),
+              'idle': _ModeFollower(s, a.pdplus, 'idle')}
+    client = s.node.create_client(Trigger, core.join_name(pdplus, 'enable'))
+    if not client.wait_for_service(timeout_sec=a.timeout):
+        print(f'service {pdplus}/enable not available', file=sys.stderr)
+        return core.UNAVAILABLE
+    future = client.call_async(Trigger.Request())
+    if not s.spin_for(a.timeout, until=future.done):
+        print(f'enable: no answer from {pdplus}/enable within {a.timeout:g} s',
+              file=sys.stderr)
+        return core.UNAVAILABLE
+    resp = future.result()
+    code, text = core.trigger_outcome('enable', f'{pdplus}/enable', resp.success,
+                                      resp.message)
+    print(text, file=sys.stdout if code == core.OK else sys.stderr, flush=True)
+    if code != core.OK:
+        return code
+    s.spin_for(a.motion_timeout,
+               until=lambda: any(f.code is not None for f in follow.values()))
+    done = [f for f in follow.values() if f.code is not None]
+    return (done[0] if done else follow['hold']).verdict(a.motion_timeout)
+
+
 def wait(a, ros_args) -> int:
     """Follow pdplus's /controller_state until ``wait_outcome`` decides (bounded)."""
-    from irb_bringup import ctl_core as core
-    from irb_control.pd_plus import MODE_NAMES
-    from irb_interfaces.msg import ControllerState
-    from rclpy.qos import qos_profile_sensor_data
     s = _Session(ros_args)
-    state = {'moving': False, 'code': None, 'mode': None, 'reason': ''}
     try:
-        ns, _ = core.split_node(a.pdplus)
-
-        def on_state(msg):
-            if state['code'] is not None:
-                return
-            name = MODE_NAMES.get(msg.mode, str(msg.mode))
-            if name not in core.RESTING:
-                state['moving'] = True
-            state['mode'], state['reason'] = name, msg.stop_reason
-            state['code'] = core.wait_outcome(a.mode, msg.mode, msg.stop_reason,
-                                              state['moving'])
-        s.node.create_subscription(ControllerState, core.join_name(ns, 'controller_state'),
-                                   on_state, qos_profile_sensor_data)
-        s.spin_for(a.timeout, until=lambda: state['code'] is not None)
+        follow = _ModeFollower(s, a.pdplus, a.mode)
+        s.spin_for(a.timeout, until=lambda: follow.code is not None)
     finally:
         s.close()
-    if state['code'] == core.OK:
-        print(f'pdplus: {a.mode}')
-        return core.OK
-    if state['code'] == core.REFUSED:
-        print(f'pdplus stopped: {state["reason"] or "(no reason given)"} '
-              '(ctl status; ctl enable to go on)', file=sys.stderr)
-        return core.REFUSED
-    seen = f'last mode {state["mode"]}' if state['mode'] else 'no /controller_state'
-    print(f'wait {a.mode}: not reached within {a.timeout:g} s ({seen})', file=sys.stderr)
-    return core.UNAVAILABLE
+    return follow.verdict(a.timeout)
 
 
 def main(args=None):
     argv = list(sys.argv[1:] if args is None else args)
     mine, ros_args = _split_ros_args(argv)
     a = parse_args(mine)
-    if a.timeout <= 0 or a.window <= 0:
-        print('ctl: --timeout and --window must be > 0', file=sys.stderr)
+    if a.wait and a.command != 'enable':
+        print('ctl: --wait goes with enable (ctl enable --wait)', file=sys.stderr)
+        return 2
+    if a.timeout <= 0 or a.window <= 0 or a.motion_timeout <= 0:
+        print('ctl: --timeout, --window and --motion-timeout must be > 0', file=sys.stderr)
         return 2
     if (a.command == 'wait') != bool(a.mode):
         print('ctl: a mode goes with wait and only with wait (ctl wait hold)', file=sys.stderr)
