@@ -253,11 +253,14 @@ class ExperimentsNode(Node):
                                Parameter('root', value=str(self.root)),
                                Parameter('name', value=name),
                                Parameter('topics', value=self.record_topics),
-                               Parameter('recover_on_start', value=False)])
+                               Parameter('recover_on_start', value=False),
+                               # log time = the graph's (simulated) time, as the stamps
+                               Parameter('use_sim_time', value=bool(
+                                   self.get_parameter('use_sim_time').value))])
         executor.add_node(rec)
         deadline = time.monotonic() + self.run_timeout
         try:
-            counts = rec.writer.counts
+            counts = rec.counts
             self._spin_until(executor, lambda: (counts.get(self.js_topic, 0) > 0
                                                 and counts.get(self.state_topic, 0) > 0
                                                 and not mon.is_moving),

@@ -223,10 +223,11 @@ def _recorder_cmd(root, name, topic, *extra):
 
 
 @pytest.mark.slow
-def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
-    """A recorder process killed with SIGKILL: the bag on disk is readable as it is, holds
-    everything published up to 2 s before the kill; recovery (on the next start) salvages
-    more, and the next start refuses to overwrite the bag."""
+def test_sigkill_loses_at_most_a_tenth_of_a_second(ctx, tmp_path, bag_check, capsys):
+    """A recorder process killed with SIGKILL: its bag (one open split: splits close by size)
+    holds everything published up to 0.1 s (flush_period_s) + 0.15 s (delivery on a loaded
+    machine) before the kill; a reader recovers it by itself and says so; the next start
+    refuses to overwrite the bag."""
     context, executor = ctx
     tag = uuid.uuid4().hex[:8]
     topic = f'/js_kill_{tag}'
@@ -244,7 +245,7 @@ def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
             pub.publish(joint_state(len(sent_at)))
             sent_at.append(time.monotonic())
         node.create_timer(1 / 248, tick)
-        assert spin_until(executor, lambda: len(sent_at) and sent_at[-1] - sent_at[0] > 4.0,
+        assert spin_until(executor, lambda: len(sent_at) and sent_at[-1] - sent_at[0] > 3.0,
                           30)
         proc.send_signal(signal.SIGKILL)
         killed_at = time.monotonic()
@@ -255,21 +256,16 @@ def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
             proc.wait()
     bag = tmp_path / 'killed'
     assert list(bag.glob('*.mcap.active')), 'expected an unfinished split'
-    counts = bag_check(bag)                        # readable as left on disk
     ks = read_joint_series(bag, topic).position[:, 0].astype(int)
-    must_have = sum(1 for t in sent_at if t < killed_at - 2.0)
+    assert 'recovered (left by a killed recorder)' in capsys.readouterr().err
+    assert not list(bag.glob('*.mcap.active'))
+    counts = bag_check(bag)
+    must_have = sum(1 for t in sent_at if t < killed_at - 0.25)
     assert ks.max() + 1 >= must_have, (ks.max(), must_have, len(sent_at))
-    assert np.all(np.diff(ks) == 1) and ks[0] == 0
-    # next start: recovers the leftover, refuses to overwrite it
+    assert np.all(np.diff(ks) == 1) and ks[0] == 0 and counts[topic] == len(ks)
     again = subprocess.run(_recorder_cmd(tmp_path, 'killed', topic), capture_output=True,
                            text=True, timeout=60)
     assert again.returncode == 1 and 'exists already' in again.stderr
-    assert 'recovered' in again.stderr + again.stdout
-    assert not list(bag.glob('*.mcap.active'))
-    after = bag_check(bag)
-    assert after[topic] >= counts[topic]
-    ks2 = read_joint_series(bag, topic).position[:, 0].astype(int)
-    assert np.all(np.diff(ks2) == 1)
     node.destroy_node()
 
 
