@@ -75,6 +75,7 @@ class LossLedger:
         self.tracks: dict[str, list[int]] = {}
         self.lost: dict[str, int] = {}
         self.holes: dict[str, list[tuple[int, int, int]]] = {}   # (t_ns, first, last) lost
+        self.first_seen: dict[str, list[int]] = {}     # first number of each track
         self.log = log
 
     def see(self, topic: str, seq: int | None, t_ns: int) -> int:
@@ -91,6 +92,7 @@ class LossLedger:
                 best = i
         if best < 0:
             tracks.append(seq)
+            self.first_seen.setdefault(topic, []).append(int(seq))
             return 0
         gap = seq - tracks[best] - 1
         first = tracks[best] + 1
@@ -111,7 +113,10 @@ class LossLedger:
         return ', '.join(f'{t} {n}' for t, n in self.lost.items()) or 'none'
 
     def as_dict(self) -> dict:
-        return {'lost_total': self.total, 'topics': {
+        """Losses, and the first sequence number of each publisher (> 1: it published
+        before the recorder matched it; not counted as lost)."""
+        return {'lost_total': self.total, 'first_sequence_seen': dict(self.first_seen),
+                'topics': {
             t: {'lost': self.lost[t], 'holes': [
                 {'noticed_at_log_time_ns': h[0], 'publisher_sequence_first': h[1],
                  'publisher_sequence_last': h[2]} for h in self.holes[t]]}
@@ -147,6 +152,62 @@ class _WriterThread(threading.Thread):
                 self.on_error(exc)
             if self.stopping and not q:
                 return
+
+
+class _TakerThread(threading.Thread):
+    """Takes every waiting message of every subscription, round after round, without the
+    executor: an executor rebuilds its wait set for every callback (~200 us of CPU here), which
+    at 7 topics x 248 Hz (x 2.5 in lockstep) is most of a core. A round that finds nothing
+    sleeps ``idle_s``; under load rounds grow, they never fall behind by more than the
+    middleware queues hold."""
+
+    def __init__(self, subs: dict, handle, idle_s: float = 0.001, clock_sub=None):
+        super().__init__(name='recorder-take', daemon=True)
+        self.subs = subs
+        self.handle = handle
+        self.idle_s = idle_s
+        self.stopping = False
+        self.rounds = 0
+        self.clock_sub = clock_sub
+        self.sim_ns = None             # latest /clock [ns] (use_sim_time), None before one
+
+    def _take_clock(self) -> None:
+        sub = self.clock_sub
+        with sub.handle:
+            while True:
+                got = sub.handle.take_message(sub.msg_type, True)
+                if got is None:
+                    return
+                self.sim_ns = _clock_ns(got[0])
+
+    def take_round(self, limit: int = 2000) -> int:
+        """Every topic in turn: up to ``limit`` waiting messages (the latest /clock first,
+        under sim time, so their log time is the time they were taken)."""
+        from rclpy.exceptions import InvalidHandle
+        n = 0
+        for topic, sub in list(self.subs.items()):
+            if self.clock_sub is not None:
+                self._take_clock()
+            try:
+                with sub.handle:
+                    batch = []
+                    while len(batch) < limit:
+                        got = sub.handle.take_message(sub.msg_type, True)
+                        if got is None:
+                            break
+                        batch.append(got)
+            except InvalidHandle:
+                continue
+            if batch:
+                self.handle(topic, batch)
+                n += len(batch)
+        self.rounds += 1
+        return n
+
+    def run(self) -> None:
+        while not self.stopping:
+            if not self.take_round():
+                time.sleep(self.idle_s)
 
 
 def _make_node_class():
@@ -186,6 +247,27 @@ def _make_node_class():
             self._thread = _WriterThread(self.writer, self._fail)
             self._thread.start()
             self.subs = {}
+            # the subscriptions live on a node no executor spins: the taker thread takes
+            # their messages (the clock, timers and discovery stay on this node)
+            import rclpy
+            self._data_node = rclpy.create_node(
+                f'{self.get_name()}_data', namespace=self.get_namespace(),
+                context=self.context, start_parameter_services=False,
+                enable_rosout=False)
+            self._clock = self.get_clock()
+            self._sim_time = bool(self.get_parameter('use_sim_time').value)
+            clock_sub = None
+            if self._sim_time:
+                # /clock taken by the taker itself, right before each round: the log time of
+                # a message is the simulated time when it was taken (an executor's clock
+                # lags by as much as its own backlog on a loaded machine)
+                from rclpy.qos import QoSProfile, ReliabilityPolicy
+                from rosgraph_msgs.msg import Clock
+                clock_sub = self._data_node.create_subscription(
+                    Clock, '/clock', _never_called,
+                    QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+            self._taker = _TakerThread(self.subs, self._on_batch, clock_sub=clock_sub)
+            self._taker.start()
             self._t0 = time.monotonic()
             self._last = (self._t0, 0)
             self._check_topics()
@@ -228,49 +310,32 @@ def _make_node_class():
                 self.received[topic] = 0
                 self._thread.queue.append((None, 0, info))
                 qos = recording_qos(pubs, self.depth)
-                self.subs[topic] = self.create_subscription(
-                    message_class(msgtype), topic, self._callback(topic), qos, raw=True)
+                self.subs[topic] = self._data_node.create_subscription(
+                    message_class(msgtype), topic, _never_called, qos, raw=True)
                 self.get_logger().info(
                     f'subscribed to {topic} [{msgtype}] ({qos.reliability.name.lower()}, '
                     f'{qos.history.name.lower()}, {qos.durability.name.lower()})')
 
-        def _callback(self, topic: str):
-            """Take this message and every one waiting behind it (one executor round)."""
-            queue = self._thread.queue
-            wake = self._thread.wake
-            clock = self.get_clock()
-            tap = self.taps.get(topic)
+        def _on_batch(self, topic: str, batch: list) -> None:
+            """Messages taken from ``topic``'s queue: log time (the node's clock: simulated
+            under use_sim_time, read once per batch), loss check, to the writer, taps."""
+            if self._sim_time:
+                t = self._taker.sim_ns
+                if t is None:                  # no /clock yet: the node's clock (0)
+                    t = self._clock.now().nanoseconds
+            else:
+                t = time.time_ns()
             see = self.ledger.see
-            received = self.received
-            holder = {}
-
-            def one(data, info) -> None:
-                t = clock.now().nanoseconds
-                see(topic, info.get('publication_sequence_number'), t)
-                queue.append((topic, t, data))
+            queue = self._thread.queue
+            tap = self.taps.get(topic)
+            for data, info in batch:
+                seq = info.get('publication_sequence_number') or 0
+                see(topic, seq, t)
+                queue.append((topic, t, data, seq))
                 if tap is not None:
                     tap(data)
-
-            def cb(data: bytes, info) -> None:
-                from rclpy.exceptions import InvalidHandle
-                one(data, info)
-                n = 1
-                sub = holder['sub'] if 'sub' in holder else self.subs.get(topic)
-                holder['sub'] = sub
-                if sub is not None:
-                    try:
-                        with sub.handle:
-                            while n < 10_000:
-                                got = sub.handle.take_message(sub.msg_type, True)
-                                if got is None:
-                                    break
-                                one(got[0], got[1])
-                                n += 1
-                    except InvalidHandle:       # destroyed meanwhile: nothing left
-                        pass
-                received[topic] += n
-                wake.set()
-            return cb
+            self.received[topic] += len(batch)
+            self._thread.wake.set()
 
         def _fail(self, exc) -> None:
             """Writing failed (a full disk): one line, stop recording (main exits 1)."""
@@ -304,8 +369,14 @@ def _make_node_class():
                                                   else ''))
 
         def close(self) -> None:
-            """Write what is queued, the losses (losses.yaml, custom_data), close the bag."""
+            """Take what is waiting, write what is queued and the losses (losses.yaml,
+            custom_data), close the bag."""
             import yaml
+            if self._taker.is_alive():
+                self._taker.stopping = True
+                self._taker.join()
+                while self._taker.take_round():     # what arrived meanwhile
+                    pass
             self._thread.stopping = True
             self._thread.wake.set()
             self._thread.join()
@@ -331,7 +402,25 @@ def _make_node_class():
             else:                              # after Ctrl-C the rosout publisher is gone
                 print(f'[recorder] {text}', file=sys.stderr)
 
+        def destroy_node(self):
+            self._taker.stopping = True
+            if self._taker.is_alive():
+                self._taker.join()
+            self._data_node.destroy_node()
+            return super().destroy_node()
+
     return RecorderNode
+
+
+def _clock_ns(data: bytes) -> int:
+    """Time [ns] of a serialized rosgraph_msgs/Clock (CDR header, int32 sec, uint32 nsec)."""
+    import struct
+    sec, nsec = struct.unpack_from('<iI' if data[1] else '>iI', data, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+def _never_called(msg) -> None:
+    """Callback of the recorder's subscriptions: their node is never spun."""
 
 
 def __getattr__(name):
