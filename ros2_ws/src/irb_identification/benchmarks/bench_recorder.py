@@ -169,7 +169,8 @@ def run_case(args) -> dict:
     result = {
         'case': f'{args.topics} topics, {args.mode}, {args.burners} burners',
         'topics': args.topics, 'mode': args.mode, 'burners': args.burners,
-        'seconds': args.seconds, 'publisher_depth': args.pub_depth, 'speed': args.speed if args.mode == 'lockstep' else 1.0,
+        'seconds': args.seconds, 'publisher_depth': args.pub_depth,
+        'speed': args.speed if args.mode == 'lockstep' else 1.0,
         'publisher_rate_hz': sent['rate_hz'], 'expected': expected, 'lost': lost_total,
         'lost_fraction': lost_total / max(expected, 1),
         'lost_inside': inside_total,

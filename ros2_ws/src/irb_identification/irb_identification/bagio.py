@@ -946,7 +946,8 @@ def deserialize(msgtype: str, data: bytes):
     return typestore([msgtype]).deserialize_cdr(data, msgtype)
 
 
-__all__ = ['BagError', 'BagExistsError', 'BagIntegrity', 'BagWriter', 'check_bag', 'FileStats', 'bag_in_use', 'RecoveryReport',
+__all__ = ['BagError', 'BagExistsError', 'BagIntegrity', 'BagWriter', 'check_bag',
+           'FileStats', 'bag_in_use', 'RecoveryReport',
            'TopicInfo', 'TopicMessages', 'bag_info', 'bag_topics', 'deserialize',
            'iter_messages', 'message_definition', 'metadata_dict',
            'needs_recovery',
