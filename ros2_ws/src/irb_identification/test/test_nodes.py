@@ -190,9 +190,10 @@ def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
     assert s.messages == len(run.t)
     assert s.wall_s == pytest.approx(s.bag_span_s / 2, abs=0.1)
     player.destroy_node()
-    # asked to wait for a subscriber nobody provides: plays after the bound and says so
+    # asked to wait for a subscriber nobody provides: plays after the bound and says so;
+    # rate 0 given as an integer, as a user types rate:=0
     player = ReplayNode(context=context, parameter_overrides=params(
-        bag=str(bag), rate=0.0, start_delay_s=0.0, wait_for_subscribers=1,
+        bag=str(bag), rate=0, start_delay_s=0.0, wait_for_subscribers=1,
         wait_timeout_s=0.3, topics=['/joint_states']))
     said = []
 
@@ -203,6 +204,7 @@ def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
         def warning(self, m):
             said.append(m)
     player.get_logger = Log
+    assert player.rate == 0.0 and isinstance(player.get_parameter('rate').value, float)
     player.run()
     assert player.stats.messages == len(run.t)
     assert any('playing anyway after wait_timeout_s = 0.3 s: /joint_states has 0 of 1'
@@ -302,3 +304,86 @@ def test_topic_seen_first_through_a_subscriber_is_recorded_once_published(
     rec.destroy_node()
     other.destroy_node()
     bag_check(tmp_path / 'late')
+
+
+def test_loss_ledger_tracks_publishers_and_names_holes():
+    """Pure: sequence holes per topic, when seen; two publishers on one topic are two tracks;
+    a publisher first seen at n > 1 (it published before the recorder) is noted, not lost."""
+    from irb_identification.recorder_node import LossLedger
+    said = []
+    led = LossLedger(log=said.append)
+    for s in (1, 2, 3, 7, 8):
+        led.see('/a', s, s * 10)
+    assert led.lost == {'/a': 3} and led.holes['/a'] == [(70, 4, 6)]
+    assert said == ['/a: 3 message(s) lost before the recorder got them (publisher sequence '
+                    '4..6, noticed at log time 0.000 s)']
+    for s in (1, 1, 2, 2, 3, 3):                       # two publishers in step
+        led.see('/b', s, 0)
+    led.see('/c', 40, 0)                               # joined late
+    led.see('/c', 41, 0)
+    assert '/b' not in led.lost and '/c' not in led.lost
+    d = led.as_dict()
+    assert d['lost_total'] == 3 and d['first_sequence_seen']['/c'] == [40]
+
+
+def test_recorder_keeps_every_message_of_seven_topics_at_248_hz(ctx, tmp_path, bag_check):
+    """7 topics at 248 Hz for 3 s into an in-process recorder: every message, once, in order
+    of its publisher's count (k in the payload, checked with the mcap reader) and numbered
+    1..N in the MCAP sequence field; nothing reported lost; a latched topic published before
+    the recorder existed is in the bag too."""
+    from mcap.reader import make_reader
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy
+    from std_msgs.msg import String
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topics = [f'/seven_{tag}_{i}' for i in range(7)]
+    node = rclpy.create_node(f'seven_{tag}', context=context)
+    state = QoSProfile(depth=250, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST)
+    pubs = [node.create_publisher(JointState, t, state) for t in topics]
+    latched_topic = f'/latched_{tag}'
+    latched = node.create_publisher(String, latched_topic, QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    latched.publish(String(data='urdf'))
+    executor.add_node(node)
+    rec = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='seven', topics=[*topics, latched_topic],
+        discovery_period_s=0.1, progress_period_s=0.0))
+    executor.add_node(rec)
+    assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)
+                      and latched_topic in rec.subs)
+    n_ticks = 744                                     # 3 s at 248 Hz
+    sent = [0]
+
+    def tick():
+        if sent[0] < n_ticks:
+            m = joint_state(sent[0])
+            for p in pubs:
+                p.publish(m)
+            sent[0] += 1
+    timer = node.create_timer(1 / 248, tick)
+    assert spin_until(executor, lambda: all(rec.counts.get(t, 0) >= n_ticks for t in topics)
+                      and rec.counts.get(latched_topic, 0) == 1, timeout=60)
+    timer.cancel()
+    executor.remove_node(rec)
+    rec.close()
+    rec.destroy_node()
+    bag = tmp_path / 'seven'
+    counts = bag_check(bag)
+    assert all(counts[t] == n_ticks for t in topics) and counts[latched_topic] == 1
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['custom_data']['lost_messages'] == '0'
+    assert not (bag / 'losses.yaml').exists()
+    from mcap_ros2.decoder import DecoderFactory
+    ks, seqs = {t: [] for t in topics}, {t: [] for t in topics}
+    for rel in info['relative_file_paths']:
+        with open(bag / rel, 'rb') as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, ch, msg, ros in reader.iter_decoded_messages(topics=topics):
+                ks[ch.topic].append(int(ros.position[0]))
+                seqs[ch.topic].append(msg.sequence)
+    for t in topics:
+        assert sorted(ks[t]) == list(range(n_ticks)), t
+        assert sorted(seqs[t]) == list(range(1, n_ticks + 1)), t
+    node.destroy_node()
