@@ -375,8 +375,10 @@ def _make_node_class():
             if self._taker.is_alive():
                 self._taker.stopping = True
                 self._taker.join()
-                while self._taker.take_round():     # what arrived meanwhile
-                    pass
+                # what arrived meanwhile; bounded, a running graph never stops sending
+                for _ in range(5):
+                    if not self._taker.take_round():
+                        break
             self._thread.stopping = True
             self._thread.wake.set()
             self._thread.join()
