@@ -182,8 +182,11 @@ def run_case(args) -> dict:
         'per_topic': per, 'loadavg_1_5_15': load, 'publisher_rc': pub.returncode,
         'recorder_tail': rec_out.strip().splitlines()[-3:],
         'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count()}
-    import shutil
-    shutil.rmtree(tmp, ignore_errors=True)
+    if not args.keep:
+        import shutil
+        shutil.rmtree(tmp, ignore_errors=True)
+    else:
+        result['bag'] = str(tmp / 'bench')
     return result
 
 
@@ -196,6 +199,7 @@ def main() -> int:
     ap.add_argument('--seconds', type=float, default=60.0)
     ap.add_argument('--speed', type=float, default=2.5, help='lockstep: x real time')
     ap.add_argument('--out', default='')
+    ap.add_argument('--keep', action='store_true', help='keep the bag (its path in the JSON)')
     ap.add_argument('--pub-depth', type=int, default=250,
                     help="publishers' keep-last depth (the simulator's STATE_PUB_DEPTH: 250)")
     args = ap.parse_args()

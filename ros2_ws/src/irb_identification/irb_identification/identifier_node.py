@@ -107,9 +107,11 @@ def _make_node_class():
             self.sub = None
             self.outcome = None
             self._late_said = 0
-            self.create_timer(0.1, self._tick)
+            from rclpy.clock import Clock, ClockType
+            steady = Clock(clock_type=ClockType.STEADY_TIME)    # also under use_sim_time
+            self.create_timer(0.1, self._tick, clock=steady)
             if p['progress_period_s'] > 0:
-                self.create_timer(float(p['progress_period_s']), self._progress)
+                self.create_timer(float(p['progress_period_s']), self._progress, clock=steady)
             self.get_logger().info(f'waiting for publishers of {p["topic"]}')
 
         def _subscribe_when_published(self) -> None:

@@ -387,3 +387,40 @@ def test_recorder_keeps_every_message_of_seven_topics_at_248_hz(ctx, tmp_path, b
         assert sorted(ks[t]) == list(range(n_ticks)), t
         assert sorted(seqs[t]) == list(range(1, n_ticks + 1)), t
     node.destroy_node()
+
+
+def test_recorder_on_sim_time_subscribes_before_the_clock_runs(ctx, tmp_path):
+    """use_sim_time and no /clock yet (a recorder started before the simulator): topics that
+    appear are still subscribed (discovery runs on the wall clock), and the log time is the
+    simulated time of the latest /clock."""
+    from rosgraph_msgs.msg import Clock
+    from rclpy.parameter import Parameter
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topic = f'/simtime_{tag}'
+    rec = RecorderNode(context=context, parameter_overrides=[
+        *params(root=str(tmp_path), name='sim', topics=[topic], discovery_period_s=0.1,
+                progress_period_s=0.0), Parameter('use_sim_time', value=True)])
+    executor.add_node(rec)
+    node = rclpy.create_node(f'simpub_{tag}', context=context)
+    pub = node.create_publisher(JointState, topic, 10)
+    clock = node.create_publisher(Clock, '/clock', 10)
+    executor.add_node(node)
+    assert spin_until(executor, lambda: topic in rec.subs, 15.0), 'not subscribed'
+    assert spin_until(executor, lambda: pub.get_subscription_count() >= 1)
+    c = Clock()
+    c.clock.sec = 5000
+    got = lambda: rec.counts.get(topic, 0) >= 1  # noqa: E731
+    end = time.monotonic() + 15
+    while not got() and time.monotonic() < end:     # /clock first, then the message
+        clock.publish(c)
+        executor.spin_once(timeout_sec=0.02)
+        if rec._taker.sim_ns == 5000 * 10**9:
+            pub.publish(joint_state(0))
+    assert got()
+    executor.remove_node(rec)
+    rec.close()
+    rec.destroy_node()
+    t = bagio.read_messages(tmp_path / 'sim', [topic])[topic].t_ns
+    assert t[0] == 5000 * 10**9
+    node.destroy_node()
