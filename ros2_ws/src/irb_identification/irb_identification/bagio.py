@@ -682,6 +682,47 @@ def _metadata_info(bag: Path) -> dict:
         raise BagError(f'bag {bag}: unreadable metadata.yaml ({type(exc).__name__})') from None
 
 
+def _scan_chunk(chunk: Chunk, counts: dict, topics: dict, bag: Path, rel: str) -> None:
+    """Count a chunk's messages per channel (and learn its channels) from the record
+    headers, without building a Python object per message; CRC checked; every message's log
+    time within the chunk's range; the records fill the chunk exactly."""
+    from io import BytesIO
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.stream_reader import get_chunk_data_stream
+    stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+    data = stream._stream.getvalue() if hasattr(stream._stream, 'getvalue') else \
+        stream.read(size)
+    unpack = struct.unpack_from
+    lo, hi = chunk.message_start_time, chunk.message_end_time
+    pos, end = 0, len(data)
+    while pos < end:
+        if pos + 9 > end:
+            raise BagError(f'bag {bag}: {rel} is damaged (a record cut inside a chunk)')
+        op = data[pos]
+        (length,) = unpack('<Q', data, pos + 1)
+        body = pos + 9
+        if body + length > end:
+            raise BagError(f'bag {bag}: {rel} is damaged (a record longer than its chunk)')
+        if op == 0x05:                                  # Message
+            if length < 22:
+                raise BagError(f'bag {bag}: {rel} is damaged (a message record of '
+                               f'{length} bytes)')
+            cid = unpack('<H', data, body)[0]
+            (log_time,) = unpack('<Q', data, body + 6)
+            if not lo <= log_time <= hi:
+                raise BagError(f'bag {bag}: {rel} is damaged (a message outside its '
+                               "chunk's time range)")
+            counts[cid] = counts.get(cid, 0) + 1
+        elif op == 0x04:                                # Channel
+            ch = Channel.read(ReadDataStream(BytesIO(data[body:body + length])))
+            topics[ch.id] = ch.topic
+        elif op not in (0x03,):                         # Schema; nothing else in a chunk
+            raise BagError(f'bag {bag}: {rel} is damaged (record opcode {op:#x} inside a '
+                           'chunk)')
+        pos = body + length
+
+
 def _check_file(bag: Path, rel: str) -> tuple[dict[str, int], int, int]:
     """({topic: messages}, CRCs checked, records without CRC) of one MCAP file, read
     record by record with every CRC it has validated; BagError naming the damage."""
@@ -706,18 +747,7 @@ def _check_file(bag: Path, rel: str) -> tuple[dict[str, int], int, int]:
                         checked += 1
                     else:
                         missing += 1
-                    inner = breakup_chunk(rec, validate_crc=True)
-                    n = 0
-                    for r in inner:
-                        if isinstance(r, Message):
-                            n += 1
-                            counts_by_id[r.channel_id] = counts_by_id.get(r.channel_id, 0) + 1
-                            if not rec.message_start_time <= r.log_time <= \
-                                    rec.message_end_time:
-                                raise BagError(f'bag {bag}: {rel} is damaged (a message '
-                                               'outside its chunk\'s time range)')
-                        elif isinstance(r, Channel):
-                            topics[r.id] = r.topic
+                    _scan_chunk(rec, counts_by_id, topics, bag, rel)
                 elif isinstance(rec, Message):
                     counts_by_id[rec.channel_id] = counts_by_id.get(rec.channel_id, 0) + 1
                 elif isinstance(rec, Channel):
