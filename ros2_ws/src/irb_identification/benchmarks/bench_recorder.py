@@ -88,6 +88,22 @@ def publisher(args) -> int:
     return 0
 
 
+def _group_cpu_s(pgid: int) -> float | None:
+    """CPU time [s] (user + system) of the processes of a process group (the recorder and
+    its `ros2 run` launcher), from /proc."""
+    total, tick = 0.0, os.sysconf('SC_CLK_TCK')
+    for d in Path('/proc').iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            fields = (d / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid:                     # field 5 of stat: the process group
+            total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
 def read_bag(bag: Path, topics: list[str]) -> dict:
     """Per topic: k values (position[0]) and (log time, stamp) pairs, via the mcap reader."""
     import yaml
@@ -130,6 +146,7 @@ def run_case(args) -> dict:
              '--pub-depth', str(args.pub_depth),
              '--out', str(counts_file)], env=env, timeout=args.seconds + 180)
         load = os.getloadavg()
+        cpu_s = _group_cpu_s(rec.pid)
         os.killpg(rec.pid, signal.SIGINT)
         rec_out, _ = rec.communicate(timeout=120)
     finally:
@@ -175,6 +192,8 @@ def run_case(args) -> dict:
         'lost_fraction': lost_total / max(expected, 1),
         'lost_inside': inside_total,
         'missed_at_start_or_end': lost_total - inside_total,
+        'recorder_cpu_s': cpu_s,
+        'recorder_cpu_us_per_message': 1e6 * cpu_s / max(expected, 1),
         'recorder_reported_lost': int(info.get('custom_data', {}).get('lost_messages', -1)),
         'losses_yaml_lost_total': (yaml.safe_load(losses.read_text())['lost_total']
                                    if losses.exists() else 0),

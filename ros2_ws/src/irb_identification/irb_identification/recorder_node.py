@@ -83,10 +83,14 @@ class LossLedger:
         if not seq:
             return 0
         tracks = self.tracks.setdefault(topic, [])
+        if tracks and tracks[-1] == seq - 1:           # the usual case: the same publisher
+            tracks[-1] = seq
+            return 0
         best = -1
         for i, last in enumerate(tracks):
             if last == seq - 1:
                 tracks[i] = seq
+                tracks.append(tracks.pop(i))           # most recent track last
                 return 0
             if last < seq and (best < 0 or last > tracks[best]):
                 best = i
