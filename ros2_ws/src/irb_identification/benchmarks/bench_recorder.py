@@ -200,7 +200,9 @@ def run_case(args) -> dict:
         'split_files': len(info['relative_file_paths']),
         'per_topic': per, 'loadavg_1_5_15': load, 'publisher_rc': pub.returncode,
         'recorder_tail': rec_out.strip().splitlines()[-3:],
-        'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count()}
+        'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count(),
+        'commit': subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=HERE,
+                                 capture_output=True, text=True).stdout.strip()}
     if not args.keep:
         import shutil
         shutil.rmtree(tmp, ignore_errors=True)

@@ -155,7 +155,9 @@ def main() -> int:
                            'max': float(np.max(rates)) if rates else None},
         'loadavg_1min': {'median': float(np.median(loads)), 'min': float(min(loads)),
                          'max': float(max(loads))},
-        'per_run': runs, 'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count()}
+        'per_run': runs, 'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count(),
+        'commit': subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=HERE,
+                                 capture_output=True, text=True).stdout.strip()}
     text = json.dumps(result, indent=2)
     print(text)
     res = HERE / 'results'
