@@ -224,6 +224,8 @@ def main() -> int:
     ap.add_argument('--pub-depth', type=int, default=250,
                     help="publishers' keep-last depth (the simulator's STATE_PUB_DEPTH: 250)")
     args = ap.parse_args()
+    # a timeout's SIGTERM ends the run through its finally (the burners are killed)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     if args.role == 'publisher':
         return publisher(args)
     result = run_case(args)

@@ -124,6 +124,8 @@ def main() -> int:
     ap.add_argument('--burners', type=int, default=2)
     ap.add_argument('--repeat', type=int, default=4, help='the five-speed session, times')
     args = ap.parse_args()
+    # a timeout's SIGTERM ends the run through its finally (the burners are killed)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     from irb_identification import identify
     work = Path(tempfile.mkdtemp(prefix='bench_ri_'))
     bag = work / 'session'
@@ -135,34 +137,40 @@ def main() -> int:
     burners = [subprocess.Popen([sys.executable, '-c', 'while 1: pass'])
                for _ in range(args.burners)]
     runs, loads = [], []
+
+    def summary() -> dict:
+        rates = [r['messages_per_s'] for r in runs if r['messages_per_s']]
+        return {
+            'messages_in_bag': n, 'runs': len(runs), 'runs_asked': args.runs,
+            'burners': args.burners,
+            'equal': sum(r['verdict'] == 'equal' for r in runs),
+            'refused_with_reason': sum(r['verdict'] == 'refused' for r in runs),
+            'silent_differences': sum(r['verdict'] == 'silent' for r in runs),
+            'messages_per_s': {'median': float(np.median(rates)) if rates else None,
+                               'min': float(np.min(rates)) if rates else None,
+                               'max': float(np.max(rates)) if rates else None},
+            'loadavg_1min': {'median': float(np.median(loads)), 'min': float(min(loads)),
+                             'max': float(max(loads))} if loads else None,
+            'per_run': runs, 'date': time.strftime('%Y-%m-%d %H:%M:%S'),
+            'cpus': os.cpu_count(),
+            'commit': subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=HERE,
+                                     capture_output=True, text=True).stdout.strip()}
+    res = HERE / 'results'
+    res.mkdir(exist_ok=True)
+    out = res / f'replay_identifier_{args.burners}b.json'
     try:
         for k in range(args.runs):
             runs.append(one_run(bag, offline, work, k, env))
             loads.append(os.getloadavg()[0])
             print(json.dumps(runs[-1]), file=sys.stderr, flush=True)
+            out.write_text(json.dumps(summary(), indent=2) + '\n')   # after every run
     finally:
         for b in burners:
             b.kill()
             b.wait()
-    rates = [r['messages_per_s'] for r in runs if r['messages_per_s']]
-    result = {
-        'messages_in_bag': n, 'runs': len(runs), 'burners': args.burners,
-        'equal': sum(r['verdict'] == 'equal' for r in runs),
-        'refused_with_reason': sum(r['verdict'] == 'refused' for r in runs),
-        'silent_differences': sum(r['verdict'] == 'silent' for r in runs),
-        'messages_per_s': {'median': float(np.median(rates)) if rates else None,
-                           'min': float(np.min(rates)) if rates else None,
-                           'max': float(np.max(rates)) if rates else None},
-        'loadavg_1min': {'median': float(np.median(loads)), 'min': float(min(loads)),
-                         'max': float(max(loads))},
-        'per_run': runs, 'date': time.strftime('%Y-%m-%d %H:%M:%S'), 'cpus': os.cpu_count(),
-        'commit': subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=HERE,
-                                 capture_output=True, text=True).stdout.strip()}
-    text = json.dumps(result, indent=2)
+    text = json.dumps(summary(), indent=2)
     print(text)
-    res = HERE / 'results'
-    res.mkdir(exist_ok=True)
-    (res / f'replay_identifier_{args.burners}b.json').write_text(text + '\n')
+    out.write_text(text + '\n')
     import shutil
     shutil.rmtree(work, ignore_errors=True)
     return 0
