@@ -927,9 +927,109 @@ def verify_bag(path: str | Path) -> int:
     return check_bag(path).messages
 
 
+def _read_chunk_messages(f, index, channels: dict) -> list:
+    """(log time, topic, msgtype, bytes) of one chunk, in log-time order (stable)."""
+    from mcap.stream_reader import get_chunk_data_stream
+    f.seek(index.chunk_start_offset)
+    head = f.read(9)
+    op, length = head[0], struct.unpack_from('<Q', head, 1)[0]
+    if op != 0x06:
+        raise BagError('not a chunk record at its index offset')
+    body = f.read(length)
+    start, end, usize, crc, clen = struct.unpack_from('<QQQII', body, 0)
+    compression = body[32:32 + clen].decode()
+    (rlen,) = struct.unpack_from('<Q', body, 32 + clen)
+    records = body[40 + clen:40 + clen + rlen]
+    chunk = Chunk(compression=compression, data=records, message_end_time=end,
+                  message_start_time=start, uncompressed_crc=crc, uncompressed_size=usize)
+    stream, _ = get_chunk_data_stream(chunk, validate_crc=True)
+    data = stream._stream.getvalue() if hasattr(stream._stream, 'getvalue') else \
+        stream.read(usize)
+    unpack = struct.unpack_from
+    out, pos, n = [], 0, len(data)
+    while pos + 9 <= n:
+        op = data[pos]
+        (length,) = unpack('<Q', data, pos + 1)
+        body_at = pos + 9
+        if op == 0x05:
+            cid = unpack('<H', data, body_at)[0]
+            (log_time,) = unpack('<Q', data, body_at + 6)
+            topic, msgtype = channels[cid]
+            out.append((log_time, topic, msgtype, data[body_at + 22:body_at + length]))
+        pos = body_at + length
+    out.sort(key=lambda m: m[0])
+    return out
+
+
+def _iter_mcap(bag: Path, files: list[str]) -> Iterator[tuple[str, str, int, bytes]]:
+    """Every message of an MCAP bag in log-time order, read chunk by chunk through the
+    files' chunk indexes (chunks opened lazily in the order of their start times, merged by
+    log time). About twice as fast as rosbags' reader, which ``replay`` was bound by."""
+    import heapq
+    handles, pending = [], []
+    try:
+        for fi, rel in enumerate(files):
+            f = open(bag / rel, 'rb')
+            handles.append(f)
+            summary = make_reader(f).get_summary()
+            if summary is None:
+                raise BagError(f'bag {bag}: {rel} has no summary')
+            channels = {cid: (ch.topic, summary.schemas[ch.schema_id].name)
+                        for cid, ch in summary.channels.items()}
+            for ci, idx in enumerate(summary.chunk_indexes):
+                pending.append((idx.message_start_time, fi, ci, f, idx, channels))
+        pending.sort(key=lambda p: p[:3])
+        heap: list = []          # (log time, file, chunk, position, message, messages)
+        k = 0
+        while heap or k < len(pending):
+            while k < len(pending) and (not heap or pending[k][0] <= heap[0][0]):
+                _, fi, ci, f, idx, channels = pending[k]
+                msgs = _read_chunk_messages(f, idx, channels)
+                if msgs:
+                    heapq.heappush(heap, (msgs[0][0], fi, ci, 0, msgs))
+                k += 1
+            if not heap:
+                continue
+            t, fi, ci, i, msgs = heap[0]
+            # emit from this chunk while it stays the earliest
+            limit = pending[k][0] if k < len(pending) else None
+            nxt = heap[1][0] if len(heap) > 1 else None
+            if len(heap) > 2:
+                nxt = min(nxt, heap[2][0])
+            j = i
+            while j < len(msgs):
+                m = msgs[j]
+                if (nxt is not None and m[0] > nxt) or (limit is not None and m[0] > limit):
+                    break
+                yield m[1], m[2], m[0], m[3]
+                j += 1
+            if j >= len(msgs):
+                heapq.heappop(heap)
+            else:
+                heapq.heapreplace(heap, (msgs[j][0], fi, ci, j, msgs))
+    finally:
+        for f in handles:
+            f.close()
+
+
 def iter_messages(path: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
-    """(topic, msgtype, log time [ns], CDR bytes) of every message in log-time order."""
-    reader = _open_reader(Path(path))
+    """(topic, msgtype, log time [ns], CDR bytes) of every message in log-time order (across
+    split files too). MCAP bags are read through their chunk indexes (``_iter_mcap``), others
+    with rosbags."""
+    bag = Path(path)
+    reader = _open_reader(bag)             # checks (and recovers) the bag
+    info = _metadata_info(bag) if bag.is_dir() else {}
+    if info.get('storage_identifier', '') == 'mcap':
+        files = list(info.get('relative_file_paths') or [])
+        reader.close()
+        try:
+            yield from _iter_mcap(bag, files)
+        except BagError:
+            raise
+        except (McapError, ValueError, OSError, struct.error, KeyError) as exc:
+            raise BagError(f'bag {bag}: corrupt or truncated while reading '
+                           f'({type(exc).__name__}: {exc})') from None
+        return
     try:
         for conn, t, raw in reader.messages():
             yield conn.topic, conn.msgtype, t, bytes(raw)
