@@ -5,14 +5,22 @@ Bag layout (the rosbag2 directory layout, storage ``mcap``, metadata version 9):
     <root>/<name>/
       metadata.yaml              rewritten atomically (tmp + rename) after every closed split
       <name>_0.mcap              closed split files: chunked MCAP with CRCs, summary, index
-      <name>_1.mcap
-      <name>_2.mcap.active       the split being written; renamed to .mcap when it closes
+      <name>_1.mcap.active       the split being written; renamed to .mcap when it closes
+      losses.yaml                (recorder) what was lost, per topic, and when; absent if nothing
 
-Crash safety: a split is closed (footer, summary, CRCs) every ``split_period_s`` (2 s), so a
-writer killed by SIGKILL loses at most the open split; ``metadata.yaml`` always lists only
-closed, complete files, so ``ros2 bag info/play``, rosbags and any MCAP reader open what is on
-disk. ``recover_bag`` additionally salvages the complete chunks of a left-over ``.active`` file
-(written every ``flush``) and rebuilds ``metadata.yaml`` from the MCAP files (a reindex).
+Splits close by size (``max_bytes``, the recorder's 100 MiB) or, if asked, by age
+(``split_period_s``). Crash safety: the open chunk is written out every ``flush_period_s``
+(0.1 s), so a writer killed by SIGKILL loses at most that; ``metadata.yaml`` always lists only
+closed, complete files. ``recover_bag`` salvages the complete, CRC-checked chunks of a
+left-over ``.active`` file and rebuilds ``metadata.yaml`` (a reindex); the readers below call
+it themselves on a bag left by a killed writer (one line on stderr).
+
+Integrity: every reader here first checks the bag (``check_bag``): each listed file complete
+(header, footer, summary), each chunk, the data section and the summary against their CRCs
+where the file has them, and the message counts of the chunks, the summary statistics and
+metadata.yaml against each other. A damaged or truncated bag is a ``BagError`` naming the bag,
+the file and the damage; a bag without CRCs reads, and ``check_bag`` says so (``crc``:
+'valid', 'absent' or 'partial'), since damage inside a message cannot be seen then.
 
 Messages are stored as the raw CDR bytes received from the middleware (serialization ``cdr``),
 with the message definition (``ros2msg``) and RIHS01 type hash of each topic, as rosbag2 does.
@@ -200,6 +208,25 @@ def write_metadata(bag: Path, meta: dict) -> None:
 
 
 # --- writer -----------------------------------------------------------------------------------
+def _message_write(self, stream) -> None:
+    """mcap's Message.write in two writes instead of seven (the same bytes: opcode, length,
+    channel id, sequence, log time, publish time, data); the recorder writes thousands of
+    messages a second on a loaded machine."""
+    buf = stream._buffer
+    buf.write(struct.pack('<BQHIQQ', 0x05, 22 + len(self.data), self.channel_id,
+                          self.sequence, self.log_time, self.publish_time))
+    buf.write(self.data)
+
+
+def _install_fast_message_write() -> None:
+    from mcap.data_stream import RecordBuilder
+    if hasattr(RecordBuilder(), '_buffer'):
+        Message.write = _message_write
+
+
+_install_fast_message_write()
+
+
 class _Split:
     """One open MCAP split file."""
 
@@ -228,13 +255,16 @@ class _Split:
             {'offered_qos_profiles': yaml.safe_dump([dict(q) for q in t.qos]),
              'topic_type_hash': t.type_hash})
 
-    def write(self, topic: str, t_ns: int, data: bytes) -> None:
+    def write(self, topic: str, t_ns: int, data: bytes, sequence: int = 0) -> None:
         s = self.stats
         if s.count == 0:
             s.start_ns = s.end_ns = t_ns
-        s.start_ns, s.end_ns = min(s.start_ns, t_ns), max(s.end_ns, t_ns)
+        elif t_ns < s.start_ns:
+            s.start_ns = t_ns
+        elif t_ns > s.end_ns:
+            s.end_ns = t_ns
         s.count += 1
-        self.mcap.add_message(self.channels[topic], t_ns, data, t_ns)
+        self.mcap.add_message(self.channels[topic], t_ns, data, t_ns, sequence)
 
     def flush(self) -> None:
         self.mcap.flush()
@@ -257,32 +287,38 @@ class BagWriteError(BagError):
 
 
 class BagWriter:
-    """Crash-safe rosbag2 MCAP writer that splits every ``split_period_s`` of wall time.
+    """Crash-safe rosbag2 MCAP writer.
 
-    ``write(topic, t_ns, data)`` takes raw CDR bytes and a log time [ns]. Call ``maybe_split``
-    periodically (the recorder does, from a timer) so that a quiet bag still closes its split;
-    ``write`` calls it too. ``close`` finishes the last split. Never overwrites: the bag
-    directory must not exist (``BagExistsError``). An OSError while writing (a full disk)
-    becomes one ``BagWriteError``; see there.
+    ``write(topic, t_ns, data)`` takes raw CDR bytes and a log time [ns]. A split closes when
+    it holds ``max_bytes`` of messages (0 = never) or is older than ``split_period_s`` of
+    ``clock`` (0 = never); the open chunk is written out every ``flush_period_s`` of ``clock``
+    (a SIGKILL loses at most that much). Call ``tick`` periodically (the recorder's writer
+    thread does) so that a quiet bag still flushes and closes its split; ``write`` calls it
+    too. ``close`` finishes the last split. Never overwrites: the bag directory must not exist
+    (``BagExistsError``). An OSError while writing (a full disk) becomes one
+    ``BagWriteError``; see there.
     """
 
-    def __init__(self, path: str | Path, split_period_s: float = 2.0,
+    def __init__(self, path: str | Path, split_period_s: float = 0.0,
                  chunk_size: int = 64 * 1024, compression: str = 'none',
                  clock: Callable[[], float] = time.monotonic,
-                 custom_data: dict[str, str] | None = None):
+                 custom_data: dict[str, str] | None = None, max_bytes: int = 0,
+                 flush_period_s: float = 0.1):
         self.path = Path(path)
         if self.path.exists():
             raise BagExistsError(f'bag {self.path} exists already, not overwriting')
         if compression not in ('none', 'zstd'):
             raise ValueError(f"compression must be 'none' or 'zstd', not {compression!r}")
-        if split_period_s <= 0:
-            raise ValueError('split_period_s must be > 0')
+        if split_period_s < 0 or max_bytes < 0 or flush_period_s < 0:
+            raise ValueError('split_period_s, max_bytes and flush_period_s must be >= 0')
         self.path.mkdir(parents=True)
         self._lock = open(self.path / LOCK_NAME, 'w')
         fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         self._lock.write(f'{os.getpid()}\n')
         self._lock.flush()
         self.split_period_s = float(split_period_s)
+        self.max_bytes = int(max_bytes)
+        self.flush_period_s = float(flush_period_s)
         self.chunk_size = int(chunk_size)
         self.compression = compression
         self.clock = clock
@@ -292,6 +328,8 @@ class BagWriter:
         self.files: list[FileStats] = []
         self.bytes_written = 0
         self._split: _Split | None = None
+        self._split_bytes = 0
+        self._flushed_at = clock()
         self._index = 0
         self._closed = False
         self.failed = ''               # why writing stopped ('' = it did not)
@@ -310,24 +348,48 @@ class BagWriter:
         if self._split is not None:
             self._split.add_topic(topic)
 
-    def write(self, topic: str, t_ns: int, data: bytes) -> None:
-        """Append one serialized message with log time ``t_ns`` [ns]."""
+    def write(self, topic: str, t_ns: int, data: bytes, sequence: int = 0) -> None:
+        """Append one serialized message with log time ``t_ns`` [ns] (and the publisher's
+        sequence number, if known, in the MCAP message's ``sequence``)."""
         if self._closed:
             raise BagError(f'bag {self.path} is closed')
         if self.failed:
             raise BagWriteError(self.failed)
         if topic not in self.topics:
             raise BagError(f'topic {topic} not registered')
-        with self._guard():
-            self.maybe_split()
-            if self._split is None:
-                self._split = _Split(self.path / f'{self.path.name}_{self._index}.mcap',
-                                     list(self.topics.values()), self.chunk_size,
-                                     self.compression, self.clock())
+        try:
+            split = self._split
+            if split is None or self.max_bytes or self.split_period_s:
+                self.maybe_split()
+                split = self._split
+            if split is None:
+                split = self._split = _Split(
+                    self.path / f'{self.path.name}_{self._index}.mcap',
+                    list(self.topics.values()), self.chunk_size, self.compression,
+                    self.clock())
+                self._split_bytes = 0
                 self._index += 1
-            self._split.write(topic, int(t_ns), data)
+            split.write(topic, int(t_ns), data, sequence & 0xFFFFFFFF)
+        except OSError as exc:
+            self._failed_on(exc)
         self.counts[topic] += 1
         self.bytes_written += len(data)
+        self._split_bytes += len(data)
+
+    def tick(self) -> None:
+        """Close the split if it is full or old, else write the open chunk out if
+        ``flush_period_s`` passed since the last time (the crash-loss bound)."""
+        if self._split is None or self.failed:
+            return
+        if self.maybe_split():
+            return
+        if self.clock() - self._flushed_at >= self.flush_period_s:
+            self.flush()
+
+    def _failed_on(self, exc: OSError):
+        """Mark the writer failed on ``exc`` (e.g. ENOSPC) and raise BagWriteError."""
+        with self._guard():
+            raise exc
 
     def _guard(self):
         """OSError (e.g. ENOSPC) -> BagWriteError once, the writer marked failed."""
@@ -350,8 +412,14 @@ class BagWriter:
         return _Guard()
 
     def maybe_split(self) -> bool:
-        """Close the open split if it is older than ``split_period_s``; True if it did."""
-        if self._split is None or self.clock() - self._split.opened_at < self.split_period_s:
+        """Close the open split if it holds ``max_bytes`` or is older than ``split_period_s``;
+        True if it did."""
+        if self._split is None:
+            return False
+        full = self.max_bytes > 0 and self._split_bytes >= self.max_bytes
+        old = (self.split_period_s > 0
+               and self.clock() - self._split.opened_at >= self.split_period_s)
+        if not (full or old):
             return False
         with self._guard():
             self._close_split()
@@ -359,6 +427,7 @@ class BagWriter:
 
     def flush(self) -> None:
         """Write the open chunk to disk (``recover_bag`` can salvage flushed chunks)."""
+        self._flushed_at = self.clock()
         if self._split is not None and not self.failed:
             with self._guard():
                 self._split.flush()
@@ -578,16 +647,226 @@ class TopicMessages:
     data: list[bytes]
 
 
-def _open_reader(path: Path):
+@dataclass
+class BagIntegrity:
+    """What ``check_bag`` found: messages per topic (as read), split files, and the CRC
+    status: 'valid' (every chunk, data section and summary carries a CRC and each matched),
+    'absent' (none carries one: damage inside a message cannot be detected), 'partial' (some
+    do, and those matched)."""
+
+    path: str
+    counts: dict[str, int]
+    files: list[str]
+    crc: str
+    crc_checked: int = 0           # CRCs present and checked
+    crc_missing: int = 0           # records (chunks, data sections, summaries) without a CRC
+
+    @property
+    def messages(self) -> int:
+        return sum(self.counts.values())
+
+    def describe(self) -> str:
+        """One line: '<bag>: N messages in k file(s), CRCs present and valid' (or absent)."""
+        crc = {'valid': f'CRCs present and valid ({self.crc_checked} checked)',
+               'absent': 'no CRCs (written without them: damage inside a message cannot be '
+                         'detected; structure and counts checked)',
+               'partial': f'CRCs partly present: {self.crc_checked} present and valid, '
+                          f'{self.crc_missing} records without'}[self.crc]
+        return f'{self.path}: {self.messages} messages in {len(self.files)} file(s), {crc}'
+
+
+def _metadata_info(bag: Path) -> dict:
+    try:
+        return yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise BagError(f'bag {bag}: unreadable metadata.yaml ({type(exc).__name__})') from None
+
+
+def _scan_chunk(chunk: Chunk, counts: dict, topics: dict, bag: Path, rel: str) -> None:
+    """Count a chunk's messages per channel (and learn its channels) from the record
+    headers, without building a Python object per message; CRC checked; every message's log
+    time within the chunk's range; the records fill the chunk exactly."""
+    from io import BytesIO
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.stream_reader import get_chunk_data_stream
+    stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+    data = stream._stream.getvalue() if hasattr(stream._stream, 'getvalue') else \
+        stream.read(size)
+    unpack = struct.unpack_from
+    lo, hi = chunk.message_start_time, chunk.message_end_time
+    pos, end = 0, len(data)
+    while pos < end:
+        if pos + 9 > end:
+            raise BagError(f'bag {bag}: {rel} is damaged (a record cut inside a chunk)')
+        op = data[pos]
+        (length,) = unpack('<Q', data, pos + 1)
+        body = pos + 9
+        if body + length > end:
+            raise BagError(f'bag {bag}: {rel} is damaged (a record longer than its chunk)')
+        if op == 0x05:                                  # Message
+            if length < 22:
+                raise BagError(f'bag {bag}: {rel} is damaged (a message record of '
+                               f'{length} bytes)')
+            cid = unpack('<H', data, body)[0]
+            (log_time,) = unpack('<Q', data, body + 6)
+            if not lo <= log_time <= hi:
+                raise BagError(f'bag {bag}: {rel} is damaged (a message outside its '
+                               "chunk's time range)")
+            counts[cid] = counts.get(cid, 0) + 1
+        elif op == 0x04:                                # Channel
+            ch = Channel.read(ReadDataStream(BytesIO(data[body:body + length])))
+            topics[ch.id] = ch.topic
+        elif op not in (0x03,):                         # Schema; nothing else in a chunk
+            raise BagError(f'bag {bag}: {rel} is damaged (record opcode {op:#x} inside a '
+                           'chunk)')
+        pos = body + length
+
+
+def _check_file(bag: Path, rel: str) -> tuple[dict[str, int], int, int]:
+    """({topic: messages}, CRCs checked, records without CRC) of one MCAP file, read
+    record by record with every CRC it has validated; BagError naming the damage."""
+    from mcap.records import DataEnd, Footer, Statistics
+    path = bag / rel
+    try:
+        size = path.stat().st_size
+    except OSError:
+        raise BagError(f'bag {bag}: {rel} is listed in metadata.yaml but missing') from None
+    counts_by_id: dict[int, int] = {}
+    topics: dict[int, str] = {}
+    stats = None
+    footer = None
+    checked = missing = 0
+    chunks = 0
+    try:
+        with open(path, 'rb') as f:
+            for rec in StreamReader(f, emit_chunks=True, validate_crcs=True).records:
+                if isinstance(rec, Chunk):
+                    chunks += 1
+                    if rec.uncompressed_crc:
+                        checked += 1
+                    else:
+                        missing += 1
+                    _scan_chunk(rec, counts_by_id, topics, bag, rel)
+                elif isinstance(rec, Message):
+                    counts_by_id[rec.channel_id] = counts_by_id.get(rec.channel_id, 0) + 1
+                elif isinstance(rec, Channel):
+                    topics[rec.id] = rec.topic
+                elif isinstance(rec, Statistics):
+                    stats = rec
+                elif isinstance(rec, DataEnd):
+                    if rec.data_section_crc:
+                        checked += 1
+                    else:
+                        missing += 1
+                elif isinstance(rec, Footer):
+                    footer = rec
+    except BagError:
+        raise
+    except (McapError, ValueError, EOFError, OSError, struct.error, KeyError,
+            IndexError) as exc:
+        text = str(exc) or type(exc).__name__
+        raise BagError(f'bag {bag}: {rel} is damaged or truncated ({type(exc).__name__}: '
+                       f'{text})') from None
+    except Exception as exc:  # noqa: BLE001 - a decompressor's error on a damaged chunk
+        raise BagError(f'bag {bag}: {rel} is damaged ({type(exc).__name__}: {exc})') from None
+    if footer is None:
+        raise BagError(f'bag {bag}: {rel} is truncated (no footer: its writer did not finish '
+                       'it)')
+    if footer.summary_start:
+        if footer.summary_crc:
+            with open(path, 'rb') as f:
+                f.seek(footer.summary_start)
+                body = f.read(size - 8 - 4 - footer.summary_start)
+            import zlib
+            if zlib.crc32(body) != footer.summary_crc:
+                raise BagError(f'bag {bag}: {rel} is damaged (summary CRC mismatch)')
+            checked += 1
+        else:
+            missing += 1
+    if stats is not None:
+        if stats.message_count != sum(counts_by_id.values()):
+            raise BagError(f'bag {bag}: {rel} is damaged: its summary counts '
+                           f'{stats.message_count} messages, {sum(counts_by_id.values())} '
+                           'were read')
+        for cid, n in stats.channel_message_counts.items():
+            if counts_by_id.get(cid, 0) != n:
+                raise BagError(f'bag {bag}: {rel} is damaged: channel '
+                               f'{topics.get(cid, cid)} has {counts_by_id.get(cid, 0)} '
+                               f'messages, its summary says {n}')
+    counts: dict[str, int] = {}
+    for cid, n in counts_by_id.items():
+        if cid not in topics:
+            raise BagError(f'bag {bag}: {rel} is damaged (messages of an unknown channel)')
+        counts[topics[cid]] = counts.get(topics[cid], 0) + n
+    return counts, checked, missing
+
+
+_CHECKED: dict = {}
+
+
+def check_bag(path: str | Path) -> BagIntegrity:
+    """Read every split file of an MCAP bag record by record: complete (footer), every CRC
+    it has valid, counts of chunks, summary and metadata.yaml equal. BagError with one line
+    naming the bag, the file and the damage. Cached per file state (path, size, mtime)."""
+    bag = Path(path)
+    info = _metadata_info(bag)
+    files = list(info.get('relative_file_paths') or [])
+    try:
+        key = (str(bag.resolve()), tuple((rel, (bag / rel).stat().st_size,
+                                          (bag / rel).stat().st_mtime_ns) for rel in files),
+               (bag / 'metadata.yaml').stat().st_mtime_ns)
+    except OSError:
+        key = None
+    if key is not None and key in _CHECKED:
+        return _CHECKED[key]
+    if info.get('storage_identifier', 'mcap') != 'mcap':
+        raise BagError(f'bag {bag}: storage {info.get("storage_identifier")!r}, not mcap')
+    counts: dict[str, int] = {}
+    checked = missing = 0
+    for rel in files:
+        c, k, m = _check_file(bag, rel)
+        checked, missing = checked + k, missing + m
+        for t, n in c.items():
+            counts[t] = counts.get(t, 0) + n
+    listed = {e['topic_metadata']['name']: int(e.get('message_count', 0))
+              for e in info.get('topics_with_message_count') or []}
+    for t in sorted(set(listed) | set(counts)):
+        if listed.get(t, 0) != counts.get(t, 0):
+            raise BagError(f'bag {bag}: {t} has {counts.get(t, 0)} messages in its files, '
+                           f'metadata.yaml says {listed.get(t, 0)} (damaged, or files '
+                           'missing)')
+    total = int(info.get('message_count', sum(counts.values())))
+    if total != sum(counts.values()):
+        raise BagError(f'bag {bag}: {sum(counts.values())} messages in its files, '
+                       f'metadata.yaml says {total}')
+    crc = 'valid' if not missing else ('absent' if not checked else 'partial')
+    out = BagIntegrity(str(bag), counts, files, crc, checked, missing)
+    if key is not None:
+        _CHECKED[key] = out
+    return out
+
+
+def _open_reader(path: Path, check: bool = True):
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
     if not path.exists():
         raise BagError(f'bag {path} does not exist')
+    if path.is_dir() and needs_recovery(path) and list(path.glob('*.mcap*')):
+        # left by a killed recorder: salvage what it flushed (idempotent), say so
+        import sys
+        try:
+            rep = recover_bag(path)
+        except (BagError, OSError) as exc:
+            raise BagError(f'bag {path}: left by a killed recorder and not recoverable '
+                           f'({exc})') from None
+        print(f'bag {path}: recovered (left by a killed recorder): {rep.salvaged_messages} '
+              f'messages salvaged' + (f'; {"; ".join(rep.problems)}' if rep.problems else ''),
+              file=sys.stderr)
     if path.is_dir() and not (path / 'metadata.yaml').is_file():
-        hint = (' (left by a killed recorder: start a recorder with this root and '
-                'recover_on_start:=true, its default, or call irb_identification.bagio.'
-                'recover_bag)' if needs_recovery(path) else '')
-        raise BagError(f'bag {path}: no metadata.yaml{hint}')
+        raise BagError(f'bag {path}: no metadata.yaml (and no MCAP file to rebuild it from)')
+    if check and path.is_dir():
+        check_bag(path)
     try:
         reader = Reader(path)
         reader.open()
@@ -644,33 +923,113 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
 
 
 def verify_bag(path: str | Path) -> int:
-    """Read every split file of a bag with CRC validation (chunks and data sections, the
-    mcap library's own reader); the number of messages, or BagError naming the file and the
-    damage. rosbags' reader does not check CRCs: a bag with a damaged chunk played as if
-    nothing were wrong."""
-    bag = Path(path)
+    """The number of messages of a bag after ``check_bag``; BagError naming the damage."""
+    return check_bag(path).messages
+
+
+def _read_chunk_messages(f, index, channels: dict) -> list:
+    """(log time, topic, msgtype, bytes) of one chunk, in log-time order (stable)."""
+    from mcap.stream_reader import get_chunk_data_stream
+    f.seek(index.chunk_start_offset)
+    head = f.read(9)
+    op, length = head[0], struct.unpack_from('<Q', head, 1)[0]
+    if op != 0x06:
+        raise BagError('not a chunk record at its index offset')
+    body = f.read(length)
+    start, end, usize, crc, clen = struct.unpack_from('<QQQII', body, 0)
+    compression = body[32:32 + clen].decode()
+    (rlen,) = struct.unpack_from('<Q', body, 32 + clen)
+    records = body[40 + clen:40 + clen + rlen]
+    chunk = Chunk(compression=compression, data=records, message_end_time=end,
+                  message_start_time=start, uncompressed_crc=crc, uncompressed_size=usize)
+    stream, _ = get_chunk_data_stream(chunk, validate_crc=True)
+    data = stream._stream.getvalue() if hasattr(stream._stream, 'getvalue') else \
+        stream.read(usize)
+    unpack = struct.unpack_from
+    out, pos, n = [], 0, len(data)
+    while pos + 9 <= n:
+        op = data[pos]
+        (length,) = unpack('<Q', data, pos + 1)
+        body_at = pos + 9
+        if op == 0x05:
+            cid = unpack('<H', data, body_at)[0]
+            (log_time,) = unpack('<Q', data, body_at + 6)
+            topic, msgtype = channels[cid]
+            out.append((log_time, topic, msgtype, data[body_at + 22:body_at + length]))
+        pos = body_at + length
+    out.sort(key=lambda m: m[0])
+    return out
+
+
+def _iter_mcap(bag: Path, files: list[str]) -> Iterator[tuple[str, str, int, bytes]]:
+    """Every message of an MCAP bag in log-time order, read chunk by chunk through the
+    files' chunk indexes (chunks opened lazily in the order of their start times, merged by
+    log time). About twice as fast as rosbags' reader, which ``replay`` was bound by."""
+    import heapq
+    handles, pending = [], []
     try:
-        info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-        files = list(info['relative_file_paths'])
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
-        raise BagError(f'bag {bag}: unreadable metadata.yaml ({type(exc).__name__})') from None
-    count = 0
-    for rel in files:
-        try:
-            with open(bag / rel, 'rb') as f:
-                for rec in StreamReader(f, emit_chunks=True, validate_crcs=True).records:
-                    for r in (breakup_chunk(rec, validate_crc=True) if isinstance(rec, Chunk)
-                              else [rec]):
-                        count += isinstance(r, Message)
-        except (McapError, ValueError, EOFError, OSError, struct.error) as exc:
-            raise BagError(f'bag {bag}: {rel} is damaged ({type(exc).__name__}: {exc})') \
-                from None
-    return count
+        for fi, rel in enumerate(files):
+            f = open(bag / rel, 'rb')
+            handles.append(f)
+            summary = make_reader(f).get_summary()
+            if summary is None:
+                raise BagError(f'bag {bag}: {rel} has no summary')
+            channels = {cid: (ch.topic, summary.schemas[ch.schema_id].name)
+                        for cid, ch in summary.channels.items()}
+            for ci, idx in enumerate(summary.chunk_indexes):
+                pending.append((idx.message_start_time, fi, ci, f, idx, channels))
+        pending.sort(key=lambda p: p[:3])
+        heap: list = []          # (log time, file, chunk, position, message, messages)
+        k = 0
+        while heap or k < len(pending):
+            while k < len(pending) and (not heap or pending[k][0] <= heap[0][0]):
+                _, fi, ci, f, idx, channels = pending[k]
+                msgs = _read_chunk_messages(f, idx, channels)
+                if msgs:
+                    heapq.heappush(heap, (msgs[0][0], fi, ci, 0, msgs))
+                k += 1
+            if not heap:
+                continue
+            t, fi, ci, i, msgs = heap[0]
+            # emit from this chunk while it stays the earliest
+            limit = pending[k][0] if k < len(pending) else None
+            nxt = heap[1][0] if len(heap) > 1 else None
+            if len(heap) > 2:
+                nxt = min(nxt, heap[2][0])
+            j = i
+            while j < len(msgs):
+                m = msgs[j]
+                if (nxt is not None and m[0] > nxt) or (limit is not None and m[0] > limit):
+                    break
+                yield m[1], m[2], m[0], m[3]
+                j += 1
+            if j >= len(msgs):
+                heapq.heappop(heap)
+            else:
+                heapq.heapreplace(heap, (msgs[j][0], fi, ci, j, msgs))
+    finally:
+        for f in handles:
+            f.close()
 
 
 def iter_messages(path: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
-    """(topic, msgtype, log time [ns], CDR bytes) of every message in log-time order."""
-    reader = _open_reader(Path(path))
+    """(topic, msgtype, log time [ns], CDR bytes) of every message in log-time order (across
+    split files too). MCAP bags are read through their chunk indexes (``_iter_mcap``), others
+    with rosbags."""
+    bag = Path(path)
+    reader = _open_reader(bag)             # checks (and recovers) the bag
+    info = _metadata_info(bag) if bag.is_dir() else {}
+    if info.get('storage_identifier', '') == 'mcap':
+        files = list(info.get('relative_file_paths') or [])
+        reader.close()
+        try:
+            yield from _iter_mcap(bag, files)
+        except BagError:
+            raise
+        except (McapError, ValueError, OSError, struct.error, KeyError) as exc:
+            raise BagError(f'bag {bag}: corrupt or truncated while reading '
+                           f'({type(exc).__name__}: {exc})') from None
+        return
     try:
         for conn, t, raw in reader.messages():
             yield conn.topic, conn.msgtype, t, bytes(raw)
@@ -717,10 +1076,11 @@ def deserialize(msgtype: str, data: bytes):
     return typestore([msgtype]).deserialize_cdr(data, msgtype)
 
 
-__all__ = ['BagError', 'BagExistsError', 'BagWriter', 'FileStats', 'bag_in_use', 'RecoveryReport',
+__all__ = ['BagError', 'BagExistsError', 'BagIntegrity', 'BagWriter', 'check_bag',
+           'FileStats', 'bag_in_use', 'RecoveryReport',
            'TopicInfo', 'TopicMessages', 'bag_info', 'bag_topics', 'deserialize',
            'iter_messages', 'message_definition', 'metadata_dict',
            'needs_recovery',
            'qos_profile_dict', 'read_messages', 'recover_bag', 'serialize', 'topic_qos',
-           'typestore',
+           'typestore', 'verify_bag',
            'write_metadata']

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from irb_description.node_help import NodeSpec, Param, Topic, exit_if_help
 from irb_description.node_main import init, running
 from irb_description.stamps import sec_nanosec
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -58,6 +58,58 @@ def joint_trajectory_msg(names: list[str], t: np.ndarray, q: np.ndarray, qd: np.
     return msg
 
 
+SPEC = NodeSpec(
+    'experiments', 'irb_identification',
+    'Eq. 4.1 friction experiments, one joint at a time, one bag per (joint, speed). offline: '
+    'simulates the plant and writes the bags; ros: publishes each run as a time-driven '
+    'JointTrajectory for pdplus and records it with an in-process recorder, timed on '
+    "pdplus's mode (works in lockstep on simulated time).",
+    params=(
+        Param('mode', 'offline', '', "'offline' (simulated plant) or 'ros'"),
+        Param('joints', ['joint_1', 'joint_2', 'joint_3'], '', 'joints to run'),
+        Param('speeds_rad_s', [float(c) for c in DEFAULT_SPEEDS], 'rad/s', 'hold speeds'),
+        Param('accel_rad_s2', 8.0, 'rad/s^2', 'ramp acceleration a1 of eq. 4.1'),
+        Param('stroke_rad', 0.8, 'rad', 'hold length: hold = stroke / speed'),
+        Param('hold_min_s', 0.6, 's', 'shortest hold'),
+        Param('hold_max_s', 4.0, 's', 'longest hold'),
+        Param('periods', 1, '', 'back-and-forth periods per run'),
+        Param('settle_s', 0.5, 's', 'standstill before the first period'),
+        Param('center_rad', list(DEFAULT_CENTER), 'rad', 'pose the moving joint is centred on '
+              '(the other joints stand there)'),
+        Param('root', '', '', "bag root; '' = $IRB_ROOT/bags or ./bags"),
+        Param('prefix', '', '', "bag name prefix; '' = friction_<date>_<time>"),
+        Param('plant_friction_file', '', '', "offline plant friction map; '' = "
+              'irb_description nominal'),
+        Param('velocity_noise_rad_s', 0.002, 'rad/s', 'offline noise std'),
+        Param('effort_noise_nm', 0.5, 'N m', 'offline noise std'),
+        Param('seed', 0, '', 'offline noise seed'),
+        Param('trajectory_topic', '/planned_trajectory', '', 'ros: JointTrajectory topic of '
+              'pdplus'),
+        Param('record_topics', list(DEFAULT_TOPICS), '', 'ros: topics recorded per run'),
+        Param('run_margin_s', 1.5, 's', 'ros: simulated time recorded after pdplus reaches '
+              'HOLD'),
+        Param('controller_state_topic', '/controller_state', '', "ros: pdplus's "
+              'ControllerState topic (runs are timed on it)'),
+        Param('joint_states_topic', '/joint_states', '', 'ros: JointState topic (the recorded '
+              'margin is checked on its stamps)'),
+        Param('plan_status_topic', '/pdplus/plan_status', '', "ros: pdplus's verdict on each "
+              'plan (latched)'),
+        Param('enable_service', '/pdplus/enable', '', 'ros: the service that starts the '
+              'accepted plan'),
+        Param('start_timeout_s', 5.0, 's', 'ros: simulated time after enable within which '
+              'pdplus must start the run'),
+        Param('run_timeout_s', 120.0, 's', 'ros: wall-clock bound of one run (an error, never '
+              'a hang)'),
+    ),
+    publishes=(Topic('/planned_trajectory', 'trajectory_msgs/JointTrajectory',
+                     'ros: each run (latched)'),),
+    subscribes=(Topic('/controller_state', 'irb_interfaces/ControllerState', 'ros: timing'),
+                Topic('/pdplus/plan_status', 'irb_interfaces/PlanStatus', 'ros: verdict')),
+    clients=(Topic('/pdplus/enable', 'std_srvs/Trigger', 'ros: start each run'),),
+    example='ros2 run irb_identification experiments --ros-args -p mode:=offline '
+            "-p joints:='[joint_2]'")
+
+
 class RunError(RuntimeError):
     """A ROS-mode run failed (pdplus stopped, did not start, or the wall-clock bound hit)."""
 
@@ -68,55 +120,29 @@ class ExperimentsNode(Node):
     def __init__(self, **kwargs):
         super().__init__('experiments', **kwargs)
 
-        def param(name, default, text):
-            return self.declare_parameter(name, default, ParameterDescriptor(
-                description=text)).value
-
-        self.mode = param('mode', 'offline', "'offline' (simulated plant) or 'ros'")
-        self.joints = list(param('joints', ['joint_1', 'joint_2', 'joint_3'], 'joints to run'))
-        self.speeds = list(param('speeds_rad_s', list(DEFAULT_SPEEDS), '[rad/s] hold speeds'))
+        from .rosutil import declare_params
+        p = declare_params(self, SPEC.params)
+        self.mode = p['mode']
+        self.joints = list(p['joints'])
+        self.speeds = list(p['speeds_rad_s'])
         self.profile_kw = dict(
-            accel=param('accel_rad_s2', 8.0, '[rad/s^2] ramp acceleration a1'),
-            stroke_rad=param('stroke_rad', 0.8, '[rad] hold length, hold = stroke / speed'),
-            hold_min_s=param('hold_min_s', 0.6, '[s] shortest hold'),
-            hold_max_s=param('hold_max_s', 4.0, '[s] longest hold'),
-            periods=param('periods', 1, 'back-and-forth periods per run'),
-            settle_s=param('settle_s', 0.5, '[s] standstill before the first period'))
-        self.center = np.array(param('center_rad', list(DEFAULT_CENTER),
-                                     '[rad] pose the moving joint is centred on (the other '
-                                     'joints stand there)'))
-        root = param('root', '', "bag root; '' = $IRB_ROOT/bags or ./bags")
-        self.root = Path(root) if root else default_bag_root()
-        self.prefix = param('prefix', '', "bag name prefix; '' = friction_<date>_<time>") or \
-            datetime.now().strftime('friction_%Y%m%d_%H%M%S')
-        self.plant_map = param('plant_friction_file', '',
-                               "offline plant friction map; '' = irb_description nominal")
-        self.sim = SimConfig(
-            velocity_noise=param('velocity_noise_rad_s', 0.002, '[rad/s] offline noise std'),
-            effort_noise=param('effort_noise_nm', 0.5, '[N m] offline noise std'),
-            seed=param('seed', 0, 'offline noise seed'))
-        self.topic = param('trajectory_topic', '/planned_trajectory',
-                           'ros mode: JointTrajectory topic of pdplus')
-        self.record_topics = list(param('record_topics', DEFAULT_TOPICS,
-                                        'ros mode: topics recorded per run'))
-        self.margin = param('run_margin_s', 1.5,
-                            '[s] ros mode: simulated time recorded after pdplus reaches HOLD')
-        self.state_topic = param('controller_state_topic', '/controller_state',
-                                 "ros mode: pdplus's ControllerState topic (runs are timed "
-                                 'on it)')
-        self.js_topic = param('joint_states_topic', '/joint_states',
-                              'ros mode: JointState topic (the recorded margin is checked on '
-                              'its stamps)')
-        self.plan_status_topic = param('plan_status_topic', '/pdplus/plan_status',
-                                       "ros mode: pdplus's verdict on each plan (latched)")
-        self.enable_service = param('enable_service', '/pdplus/enable',
-                                    'ros mode: the service that starts the accepted plan')
-        self.start_timeout = param('start_timeout_s', 5.0,
-                                   '[s] ros mode: simulated time after publishing within which '
-                                   'pdplus must start the run')
-        self.run_timeout = param('run_timeout_s', 120.0,
-                                 '[s] ros mode: wall-clock bound of one run (an error, never a '
-                                 'hang)')
+            accel=p['accel_rad_s2'], stroke_rad=p['stroke_rad'], hold_min_s=p['hold_min_s'],
+            hold_max_s=p['hold_max_s'], periods=p['periods'], settle_s=p['settle_s'])
+        self.center = np.array(p['center_rad'])
+        self.root = Path(p['root']) if p['root'] else default_bag_root()
+        self.prefix = p['prefix'] or datetime.now().strftime('friction_%Y%m%d_%H%M%S')
+        self.plant_map = p['plant_friction_file']
+        self.sim = SimConfig(velocity_noise=p['velocity_noise_rad_s'],
+                             effort_noise=p['effort_noise_nm'], seed=p['seed'])
+        self.topic = p['trajectory_topic']
+        self.record_topics = list(p['record_topics'])
+        self.margin = p['run_margin_s']
+        self.state_topic = p['controller_state_topic']
+        self.js_topic = p['joint_states_topic']
+        self.plan_status_topic = p['plan_status_topic']
+        self.enable_service = p['enable_service']
+        self.start_timeout = p['start_timeout_s']
+        self.run_timeout = p['run_timeout_s']
         for t in (self.js_topic, self.state_topic):
             if t not in self.record_topics:
                 self.record_topics.append(t)
@@ -253,11 +279,14 @@ class ExperimentsNode(Node):
                                Parameter('root', value=str(self.root)),
                                Parameter('name', value=name),
                                Parameter('topics', value=self.record_topics),
-                               Parameter('recover_on_start', value=False)])
+                               Parameter('recover_on_start', value=False),
+                               # log time = the graph's (simulated) time, as the stamps
+                               Parameter('use_sim_time', value=bool(
+                                   self.get_parameter('use_sim_time').value))])
         executor.add_node(rec)
         deadline = time.monotonic() + self.run_timeout
         try:
-            counts = rec.writer.counts
+            counts = rec.counts
             self._spin_until(executor, lambda: (counts.get(self.js_topic, 0) > 0
                                                 and counts.get(self.state_topic, 0) > 0
                                                 and not mon.is_moving),
@@ -283,6 +312,7 @@ class ExperimentsNode(Node):
 
 
 def main(args=None):
+    exit_if_help(args, SPEC)
     init(args)
     node = None
     try:

@@ -46,6 +46,46 @@ def subscription_qos(endpoints, depth: int = 1000) -> QoSProfile:
         durability=DurabilityPolicy.TRANSIENT_LOCAL if all_tl else DurabilityPolicy.VOLATILE)
 
 
+def recording_qos(endpoints, depth: int = 10000) -> QoSProfile:
+    """What the recorder subscribes with: ``subscription_qos``, and keep-all when reliable
+    (a full queue is not acknowledged, so a reliable keep-all publisher waits for the
+    recorder and a keep-last one's loss shows as a hole in its sequence numbers)."""
+    qos = subscription_qos(endpoints, depth)
+    if qos.reliability == ReliabilityPolicy.RELIABLE:
+        qos.history = HistoryPolicy.KEEP_ALL
+    return qos
+
+
+def coerce_overrides(node, params) -> None:
+    """Let a parameter take the types a user types: ``rate:=0`` for a double (an integer on
+    the command line), ``[1, 2]`` for a double array. rclpy refuses an INTEGER override of a
+    DOUBLE parameter (InvalidParameterTypeException); the override is converted to the
+    declared type before declaring."""
+    from rclpy.parameter import Parameter
+    overrides = getattr(node, '_parameter_overrides', None)
+    if not overrides:
+        return
+    for p in params:
+        given = overrides.get(p.name)
+        if given is None:
+            continue
+        v = given.value
+        if isinstance(p.default, float) and isinstance(v, int) and not isinstance(v, bool):
+            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(v))
+        elif (isinstance(p.default, list) and p.default and isinstance(p.default[0], float)
+              and isinstance(v, (list, tuple)) and v
+              and all(isinstance(x, int) and not isinstance(x, bool) for x in v)):
+            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY,
+                                          [float(x) for x in v])
+
+
+def declare_params(node, params) -> dict:
+    """``node_main.declare_params`` after ``coerce_overrides``."""
+    from irb_description.node_main import declare_params as declare
+    coerce_overrides(node, params)
+    return declare(node, params)
+
+
 def default_bag_root() -> Path:
     """$IRB_ROOT/bags (scripts/env.sh sets IRB_ROOT), else ./bags."""
     root = os.environ.get('IRB_ROOT')

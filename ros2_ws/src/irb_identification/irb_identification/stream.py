@@ -24,12 +24,13 @@ from .series import JointStateError, decode_joint_states
 
 
 def replay_status(state: str, bag: str, topics: dict, published: dict | None = None,
-                  reason: str = '') -> str:
+                  reason: str = '', stream: str = '') -> str:
     """The JSON text `replay` publishes on its status topic: ``state`` is playing, finished,
     stopped or failed; ``topics``: messages per topic in the bag (what will be played);
-    ``published``: messages published so far."""
+    ``published``: messages published so far; ``stream``: the id of this playback (each
+    topic's messages carry the publisher's sequence numbers 1..N)."""
     return json.dumps({'state': state, 'bag': str(bag), 'topics': topics,
-                       'published': published or {}, 'reason': reason})
+                       'published': published or {}, 'reason': reason, 'stream': stream})
 
 
 @dataclass
@@ -81,29 +82,52 @@ class StreamIdentifier:
         self.last_wall = None          # monotonic time [s] of the last message
         self.status: dict | None = None
         self.computed = False
+        self.late = 0                  # messages of a stream already computed (not kept)
+        self.seq_first = None          # the publisher's sequence numbers seen
+        self.seq_last = None
+        self.seq_gaps = 0              # numbers missing between first and last
+        self.seq_disorder = 0          # numbers seen out of order or twice
         self._decoded: list = []       # JointSeries of the messages decoded so far (progress)
         self._n_decoded = 0
 
     # --- input ---------------------------------------------------------------------------
-    def add(self, payload: bytes, recv_ns: int, wall_s: float) -> None:
-        if self.computed:              # a new stream after a result: start over
-            self.reset()
+    def add(self, payload: bytes, recv_ns: int, wall_s: float, seq: int | None = None) -> None:
+        """One message; ``seq``: its publisher's sequence number (DDS), if known."""
+        if self.computed:
+            if self.status is not None and seq != 1:
+                # the rest of a replayed stream that ended already: never a new stream
+                self.late += 1
+                return
+            self.reset()               # a new stream after a result: start over
         if len(self.data) >= self.config.max_messages:
             self.dropped += 1
         else:
             self.data.append(bytes(payload))
             self.recv_ns.append(int(recv_ns))
         self.last_wall = wall_s
+        if seq:
+            if self.seq_last is None:
+                self.seq_first = self.seq_last = seq
+            elif seq == self.seq_last + 1:
+                self.seq_last = seq
+            elif seq > self.seq_last + 1:
+                self.seq_gaps += seq - self.seq_last - 1
+                self.seq_last = seq
+            else:
+                self.seq_disorder += 1
 
     def on_status(self, text: str) -> None:
         try:
             st = json.loads(text)
-            if isinstance(st, dict) and 'state' in st:
-                if st['state'] == 'playing' and self.computed:
-                    self.reset()
-                self.status = st
         except json.JSONDecodeError:
-            pass
+            return
+        if not isinstance(st, dict) or 'state' not in st:
+            return
+        old = (self.status or {}).get('stream')
+        if st['state'] == 'playing' and st.get('stream') != old and (
+                self.computed or (self.status is not None and old)):
+            self.reset()               # a new playback
+        self.status = st
 
     @property
     def received(self) -> int:
@@ -115,19 +139,35 @@ class StreamIdentifier:
         n = self.status.get('topics', {}).get(self.config.topic)
         return int(n) if n is not None else None
 
-    def due(self, wall_s: float) -> str | None:
-        """Why the stream is over now ('finished', 'stopped', 'quiet'), or None."""
+    def published(self) -> int | None:
+        n = (self.status or {}).get('published', {}).get(self.config.topic)
+        return int(n) if n is not None else None
+
+    def due(self, wall_s: float, publishers: int | None = None) -> str | None:
+        """Why the stream is over now ('finished', 'stopped', 'failed', 'quiet'), or None.
+
+        After the replay's end status the stream is over once every message it published
+        arrived. While the replay's publisher is still there (``publishers`` > 0: reliable
+        delivery, it waits for our acknowledgements) nothing else ends it; once it is gone
+        (0), or when unknown (None), ``quiet_period_s`` without a message ends it short."""
         if self.computed:
             return None
         st = (self.status or {}).get('state')
-        exp = self.expected()
-        if st == 'finished' and exp is not None and self.received >= exp:
-            return 'finished'
+        if st == 'failed':
+            return 'failed'
         quiet = (self.last_wall is not None and self.config.quiet_period_s > 0
                  and wall_s - self.last_wall >= self.config.quiet_period_s)
-        if st in ('finished', 'stopped', 'failed') and (quiet or self.last_wall is None):
-            return st
-        if quiet:
+        if st in ('finished', 'stopped'):
+            pub = self.published()
+            target = pub if pub is not None else self.expected()
+            if target is not None and self.received >= target:
+                return st
+            if publishers and publishers > 0:
+                return None
+            if quiet or self.last_wall is None:
+                return st
+            return None
+        if quiet and not (st == 'playing' and publishers and publishers > 0):
             return 'quiet'
         return None
 
@@ -181,23 +221,38 @@ class StreamIdentifier:
         cfg = self.config
         self.computed = True
         exp = self.expected()
+        pub = self.published()
         st = (self.status or {}).get('state')
+        seq_ok = (self.seq_first in (None, 1) and not self.seq_gaps and not self.seq_disorder
+                  and (self.seq_last is None or self.seq_last == self.received))
         complete = (exp is not None and self.received == exp and st == 'finished'
-                    and not self.dropped)
+                    and pub in (None, exp) and not self.dropped and seq_ok)
         stream = {'trigger': trigger, 'received': self.received, 'kept': len(self.data),
-                  'dropped_over_max': self.dropped, 'expected': exp, 'replay_state': st,
+                  'dropped_over_max': self.dropped, 'expected': exp, 'published': pub,
+                  'replay_state': st, 'replay_stream': (self.status or {}).get('stream'),
                   'bag': (self.status or {}).get('bag'), 'complete': complete,
+                  'sequence': {'first': self.seq_first, 'last': self.seq_last,
+                               'missing': self.seq_gaps, 'out_of_order': self.seq_disorder},
                   'partial': False}
         report = {'out': cfg.out_map, 'stream': stream, 'joints': {}, 'problems': [],
                   'ok': False}
+        if st == 'failed':
+            reason = (self.status or {}).get('reason') or 'no reason given'
+            return self._fail(report, f'replay failed: {reason}; no map')
         why_partial = ''
         if not complete:
             if exp is None:
                 why_partial = (f'no end-of-stream signal from replay (ended: {trigger}); '
                                f'{self.received} messages')
-            elif self.received != exp or st != 'finished' or self.dropped:
+            elif self.received != exp or st != 'finished' or self.dropped or pub != exp:
                 why_partial = (f'received {self.received} of the {exp} messages the replay '
-                               f'announced (replay {st or "unknown"}, ended: {trigger})')
+                               f'announced' + (f' ({pub} published)' if pub is not None
+                                               else '')
+                               + f' (replay {st or "unknown"}, ended: {trigger})')
+            else:
+                why_partial = (f'the replay\'s sequence numbers have {self.seq_gaps} missing, '
+                               f'{self.seq_disorder} out of order, first '
+                               f'{self.seq_first} (a message lost or from elsewhere)')
         # a stream without a replay (live) is complete when it ended quietly or on request
         live = exp is None and trigger in ('quiet', 'service')
         if why_partial and not live:

@@ -179,8 +179,7 @@ def test_stream_core_bad_inputs(tmp_path, model):
             c.add(d, int(t_ns[k]), 1.0)
         c.on_status(replay_status('stopped', 'bagX', {'/joint_states': n},
                                   {'/joint_states': 1000}))
-        assert c.due(1.5) is None                # quiet period not over yet
-        assert c.due(3.5) == 'stopped'
+        assert c.due(1.5, publishers=1) == 'stopped'   # every published message arrived
         out = c.compute('stopped')
         if not allow:
             assert not out.ok and 'incomplete stream: received 1000 of the 3000' in out.error
@@ -230,6 +229,70 @@ def test_services_compute_and_reset(ctx, tmp_path):
     assert spin_until(executor, fut.done, 30.0) and fut.result().success
 
 
+def _stream_core(tmp_path, model, n=3000, **kw):
+    t_ns = 10**18 + np.arange(n) * 4_032_000
+    v = 0.5 * np.sin(np.arange(n) * 0.004032 * 2.0)
+    q = np.cumsum(v) * 0.004032
+    msgs = encode_joint_states(t_ns, ['axis'], q[:, None], v[:, None],
+                               (np.sign(v) * 2 + 0.8 * v)[:, None])
+    core = StreamIdentifier(StreamConfig(out_map=str(tmp_path / 'm.yaml'),
+                                         torque_kind='friction', **kw), model)
+    return core, msgs, t_ns
+
+
+def test_stream_accounting_never_gives_a_silent_partial_answer(tmp_path, model):
+    """The replay announces a count and a stream id, its publisher numbers the messages
+    1..N. 'finished' after 3106 of 7500 (the rest still in flight) is not the end while the
+    replay's publisher is there; once it is gone the stream is incomplete (no map); what
+    arrives late is never a new stream. A hole in the sequence numbers is incomplete even
+    when the count matches. A failed replay ends the stream at once with its reason."""
+    n = 3000
+    core, msgs, t_ns = _stream_core(tmp_path, model, n, quiet_period_s=2.0)
+    core.on_status(replay_status('playing', 'bagA', {'/joint_states': n}, stream='s1'))
+    for k in range(1106):
+        core.add(msgs[k], int(t_ns[k]), 1.0, seq=k + 1)
+    core.on_status(replay_status('finished', 'bagA', {'/joint_states': n},
+                                 {'/joint_states': n}, stream='s1'))
+    assert core.due(100.0, publishers=1) is None      # in flight: wait, whatever the quiet
+    assert core.due(100.0, publishers=0) == 'finished'  # the replay is gone: short
+    out = core.compute('finished')
+    assert not out.ok and 'received 1106 of the 3000' in out.error
+    assert not (tmp_path / 'm.yaml').exists()
+    for k in range(1106, n):                          # the late rest: not a new stream
+        core.add(msgs[k], int(t_ns[k]), 200.0, seq=k + 1)
+    assert core.late == n - 1106 and core.due(300.0, publishers=0) is None
+    assert not (tmp_path / 'm.yaml').exists()
+    # a new playback (new id) starts a new stream; every message: complete, a map
+    core.on_status(replay_status('playing', 'bagA', {'/joint_states': n}, stream='s2'))
+    for k in range(n):
+        core.add(msgs[k], int(t_ns[k]), 400.0, seq=k + 1)
+    core.on_status(replay_status('finished', 'bagA', {'/joint_states': n},
+                                 {'/joint_states': n}, stream='s2'))
+    assert core.due(400.0, publishers=1) == 'finished'
+    out = core.compute('finished')
+    assert out.ok and out.report['stream']['complete'], out.error
+    assert out.report['stream']['sequence'] == {'first': 1, 'last': n, 'missing': 0,
+                                                'out_of_order': 0}
+    # the count matches but one message is missing and another came twice
+    (tmp_path / 'm.yaml').unlink()
+    core, msgs, t_ns = _stream_core(tmp_path, model, n)
+    core.on_status(replay_status('playing', 'bagB', {'/joint_states': n}, stream='s3'))
+    for k in [*range(0, 500), 499, *range(501, n)]:
+        core.add(msgs[k], int(t_ns[k]), 1.0, seq=k + 1)
+    core.on_status(replay_status('finished', 'bagB', {'/joint_states': n},
+                                 {'/joint_states': n}, stream='s3'))
+    assert core.due(1.0, publishers=1) == 'finished'
+    out = core.compute('finished')
+    assert not out.ok and 'sequence numbers have 1 missing, 1 out of order' in out.error
+    # a replay that failed (missing or damaged bag): over at once, its reason in the error
+    core, msgs, t_ns = _stream_core(tmp_path, model, n)
+    core.on_status(replay_status('failed', 'bags/nope', {}, reason='bag bags/nope does not '
+                                 'exist', stream='s4'))
+    assert core.due(0.0, publishers=0) == 'failed'
+    out = core.compute('failed')
+    assert not out.ok and out.error == ('replay failed: bag bags/nope does not exist; no map')
+
+
 @pytest.mark.slow
 def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map, tmp_path,
                                                           domain_id):
@@ -253,8 +316,7 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
         output.wait_for('waiting for publishers', 60)
         replay = subprocess.run(
             ['ros2', 'run', 'irb_identification', 'replay', '--ros-args', '-p', f'bag:={bag}',
-             '-p', 'rate:=0.0', '-p', 'wait_for_subscribers:=1', '-p', 'wait_timeout_s:=120.0',
-             '-p', 'reliable:=true'],
+             '-p', 'rate:=0', '-p', 'wait_for_subscribers:=1', '-p', 'wait_timeout_s:=120.0'],
             capture_output=True, text=True, env=env, timeout=240)
         assert replay.returncode == 0, replay.stderr
         # the replay played to our subscriber, not into the void after its wait ran out
@@ -264,9 +326,12 @@ def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map
         except AssertionError as exc:     # what the replay saw belongs to the diagnosis
             raise AssertionError(f'{exc}\nreplay said: {replay.stderr[-2000:]}') from None
         assert any(f'{n_msgs} messages received of {n_msgs}' in x for x in lines), lines
+        # a replayed stream identified: the identifier exits by itself, 0 (complete, a map)
+        assert ident.wait(timeout=60) == 0, output.rest()
     finally:
-        os.killpg(ident.pid, __import__('signal').SIGINT)
-        assert ident.wait(timeout=30) == 0
+        if ident.poll() is None:
+            os.killpg(ident.pid, __import__('signal').SIGINT)
+            ident.wait(timeout=30)
     got = load_friction_map(out)
     for a, b in zip(got.joints, offline_map.joints):
         np.testing.assert_allclose(a.torque(np.linspace(-2, 2, 41)),
@@ -312,6 +377,27 @@ def test_several_bags_as_one_stream(ctx, model, tmp_path):
     for node in (ident, player):
         executor.remove_node(node)
         node.destroy_node()
+
+
+def test_missing_bag_fails_the_replay_and_ends_the_identifier(ctx, tmp_path):
+    """A replay of a bag that does not exist: one BagError, and a 'failed' status naming it,
+    so the identifier ends with that error (exit code 1) instead of waiting forever."""
+    from irb_identification.bagio import BagError
+    context, executor = ctx
+    ident = IdentifierNode(context=context, parameter_overrides=params(
+        out_map=str(tmp_path / 'm.yaml'), progress_period_s=0.0))
+    executor.add_node(ident)
+    assert spin_until(executor, lambda: ident.count_publishers('/replay/status') == 0
+                      and ident.count_subscribers('/replay/status') >= 1, 30.0)
+    with pytest.raises(BagError, match='nope does not exist'):
+        ReplayNode(context=context, parameter_overrides=params(bag=str(tmp_path / 'nope'),
+                                                               rate=0))
+    assert spin_until(executor, lambda: ident.exit_code is not None, 30.0)
+    assert ident.exit_code == 1
+    assert ident.outcome.error == f'replay failed: bag {tmp_path / "nope"} does not exist; no map'
+    assert not (tmp_path / 'm.yaml').exists()
+    executor.remove_node(ident)
+    ident.destroy_node()
 
 
 def test_one_callback_takes_every_waiting_message(ctx):

@@ -190,9 +190,10 @@ def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
     assert s.messages == len(run.t)
     assert s.wall_s == pytest.approx(s.bag_span_s / 2, abs=0.1)
     player.destroy_node()
-    # asked to wait for a subscriber nobody provides: plays after the bound and says so
+    # asked to wait for a subscriber nobody provides: plays after the bound and says so;
+    # rate 0 given as an integer, as a user types rate:=0
     player = ReplayNode(context=context, parameter_overrides=params(
-        bag=str(bag), rate=0.0, start_delay_s=0.0, wait_for_subscribers=1,
+        bag=str(bag), rate=0, start_delay_s=0.0, wait_for_subscribers=1,
         wait_timeout_s=0.3, topics=['/joint_states']))
     said = []
 
@@ -203,6 +204,7 @@ def test_replay_rate_timing(ctx, tmp_path, model, bag_check):
         def warning(self, m):
             said.append(m)
     player.get_logger = Log
+    assert player.rate == 0.0 and isinstance(player.get_parameter('rate').value, float)
     player.run()
     assert player.stats.messages == len(run.t)
     assert any('playing anyway after wait_timeout_s = 0.3 s: /joint_states has 0 of 1'
@@ -223,10 +225,11 @@ def _recorder_cmd(root, name, topic, *extra):
 
 
 @pytest.mark.slow
-def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
-    """A recorder process killed with SIGKILL: the bag on disk is readable as it is, holds
-    everything published up to 2 s before the kill; recovery (on the next start) salvages
-    more, and the next start refuses to overwrite the bag."""
+def test_sigkill_loses_at_most_a_tenth_of_a_second(ctx, tmp_path, bag_check, capsys):
+    """A recorder process killed with SIGKILL: its bag (one open split: splits close by size)
+    holds everything published up to 0.1 s (flush_period_s) + 0.15 s (delivery on a loaded
+    machine) before the kill; a reader recovers it by itself and says so; the next start
+    refuses to overwrite the bag."""
     context, executor = ctx
     tag = uuid.uuid4().hex[:8]
     topic = f'/js_kill_{tag}'
@@ -244,7 +247,7 @@ def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
             pub.publish(joint_state(len(sent_at)))
             sent_at.append(time.monotonic())
         node.create_timer(1 / 248, tick)
-        assert spin_until(executor, lambda: len(sent_at) and sent_at[-1] - sent_at[0] > 4.0,
+        assert spin_until(executor, lambda: len(sent_at) and sent_at[-1] - sent_at[0] > 3.0,
                           30)
         proc.send_signal(signal.SIGKILL)
         killed_at = time.monotonic()
@@ -255,21 +258,16 @@ def test_sigkill_loses_at_most_two_seconds(ctx, tmp_path, bag_check):
             proc.wait()
     bag = tmp_path / 'killed'
     assert list(bag.glob('*.mcap.active')), 'expected an unfinished split'
-    counts = bag_check(bag)                        # readable as left on disk
     ks = read_joint_series(bag, topic).position[:, 0].astype(int)
-    must_have = sum(1 for t in sent_at if t < killed_at - 2.0)
+    assert 'recovered (left by a killed recorder)' in capsys.readouterr().err
+    assert not list(bag.glob('*.mcap.active'))
+    counts = bag_check(bag)
+    must_have = sum(1 for t in sent_at if t < killed_at - 0.25)
     assert ks.max() + 1 >= must_have, (ks.max(), must_have, len(sent_at))
-    assert np.all(np.diff(ks) == 1) and ks[0] == 0
-    # next start: recovers the leftover, refuses to overwrite it
+    assert np.all(np.diff(ks) == 1) and ks[0] == 0 and counts[topic] == len(ks)
     again = subprocess.run(_recorder_cmd(tmp_path, 'killed', topic), capture_output=True,
                            text=True, timeout=60)
     assert again.returncode == 1 and 'exists already' in again.stderr
-    assert 'recovered' in again.stderr + again.stdout
-    assert not list(bag.glob('*.mcap.active'))
-    after = bag_check(bag)
-    assert after[topic] >= counts[topic]
-    ks2 = read_joint_series(bag, topic).position[:, 0].astype(int)
-    assert np.all(np.diff(ks2) == 1)
     node.destroy_node()
 
 
@@ -306,3 +304,123 @@ def test_topic_seen_first_through_a_subscriber_is_recorded_once_published(
     rec.destroy_node()
     other.destroy_node()
     bag_check(tmp_path / 'late')
+
+
+def test_loss_ledger_tracks_publishers_and_names_holes():
+    """Pure: sequence holes per topic, when seen; two publishers on one topic are two tracks;
+    a publisher first seen at n > 1 (it published before the recorder) is noted, not lost."""
+    from irb_identification.recorder_node import LossLedger
+    said = []
+    led = LossLedger(log=said.append)
+    for s in (1, 2, 3, 7, 8):
+        led.see('/a', s, s * 10)
+    assert led.lost == {'/a': 3} and led.holes['/a'] == [(70, 4, 6)]
+    assert said == ['/a: 3 message(s) lost before the recorder got them (publisher sequence '
+                    '4..6, noticed at log time 0.000 s)']
+    for s in (1, 1, 2, 2, 3, 3):                       # two publishers in step
+        led.see('/b', s, 0)
+    led.see('/c', 40, 0)                               # joined late
+    led.see('/c', 41, 0)
+    assert '/b' not in led.lost and '/c' not in led.lost
+    d = led.as_dict()
+    assert d['lost_total'] == 3 and d['first_sequence_seen']['/c'] == [40]
+
+
+def test_recorder_keeps_every_message_of_seven_topics_at_248_hz(ctx, tmp_path, bag_check):
+    """7 topics at 248 Hz for 3 s into an in-process recorder: every message, once, in order
+    of its publisher's count (k in the payload, checked with the mcap reader) and numbered
+    1..N in the MCAP sequence field; nothing reported lost; a latched topic published before
+    the recorder existed is in the bag too."""
+    from mcap.reader import make_reader
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy
+    from std_msgs.msg import String
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topics = [f'/seven_{tag}_{i}' for i in range(7)]
+    node = rclpy.create_node(f'seven_{tag}', context=context)
+    state = QoSProfile(depth=250, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST)
+    pubs = [node.create_publisher(JointState, t, state) for t in topics]
+    latched_topic = f'/latched_{tag}'
+    latched = node.create_publisher(String, latched_topic, QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    latched.publish(String(data='urdf'))
+    executor.add_node(node)
+    rec = RecorderNode(context=context, parameter_overrides=params(
+        root=str(tmp_path), name='seven', topics=[*topics, latched_topic],
+        discovery_period_s=0.1, progress_period_s=0.0))
+    executor.add_node(rec)
+    assert spin_until(executor, lambda: all(p.get_subscription_count() for p in pubs)
+                      and latched_topic in rec.subs)
+    n_ticks = 744                                     # 3 s at 248 Hz
+    sent = [0]
+
+    def tick():
+        if sent[0] < n_ticks:
+            m = joint_state(sent[0])
+            for p in pubs:
+                p.publish(m)
+            sent[0] += 1
+    timer = node.create_timer(1 / 248, tick)
+    assert spin_until(executor, lambda: all(rec.counts.get(t, 0) >= n_ticks for t in topics)
+                      and rec.counts.get(latched_topic, 0) == 1, timeout=60)
+    timer.cancel()
+    executor.remove_node(rec)
+    rec.close()
+    rec.destroy_node()
+    bag = tmp_path / 'seven'
+    counts = bag_check(bag)
+    assert all(counts[t] == n_ticks for t in topics) and counts[latched_topic] == 1
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['custom_data']['lost_messages'] == '0'
+    assert not (bag / 'losses.yaml').exists()
+    from mcap_ros2.decoder import DecoderFactory
+    ks, seqs = {t: [] for t in topics}, {t: [] for t in topics}
+    for rel in info['relative_file_paths']:
+        with open(bag / rel, 'rb') as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, ch, msg, ros in reader.iter_decoded_messages(topics=topics):
+                ks[ch.topic].append(int(ros.position[0]))
+                seqs[ch.topic].append(msg.sequence)
+    for t in topics:
+        assert sorted(ks[t]) == list(range(n_ticks)), t
+        assert sorted(seqs[t]) == list(range(1, n_ticks + 1)), t
+    node.destroy_node()
+
+
+def test_recorder_on_sim_time_subscribes_before_the_clock_runs(ctx, tmp_path):
+    """use_sim_time and no /clock yet (a recorder started before the simulator): topics that
+    appear are still subscribed (discovery runs on the wall clock), and the log time is the
+    simulated time of the latest /clock."""
+    from rosgraph_msgs.msg import Clock
+    from rclpy.parameter import Parameter
+    context, executor = ctx
+    tag = uuid.uuid4().hex[:8]
+    topic = f'/simtime_{tag}'
+    rec = RecorderNode(context=context, parameter_overrides=[
+        *params(root=str(tmp_path), name='sim', topics=[topic], discovery_period_s=0.1,
+                progress_period_s=0.0), Parameter('use_sim_time', value=True)])
+    executor.add_node(rec)
+    node = rclpy.create_node(f'simpub_{tag}', context=context)
+    pub = node.create_publisher(JointState, topic, 10)
+    clock = node.create_publisher(Clock, '/clock', 10)
+    executor.add_node(node)
+    assert spin_until(executor, lambda: topic in rec.subs, 15.0), 'not subscribed'
+    assert spin_until(executor, lambda: pub.get_subscription_count() >= 1)
+    c = Clock()
+    c.clock.sec = 5000
+    got = lambda: rec.counts.get(topic, 0) >= 1  # noqa: E731
+    end = time.monotonic() + 15
+    while not got() and time.monotonic() < end:     # /clock first, then the message
+        clock.publish(c)
+        executor.spin_once(timeout_sec=0.02)
+        if rec._taker.sim_ns == 5000 * 10**9:
+            pub.publish(joint_state(0))
+    assert got()
+    executor.remove_node(rec)
+    rec.close()
+    rec.destroy_node()
+    t = bagio.read_messages(tmp_path / 'sim', [topic])[topic].t_ns
+    assert t[0] == 5000 * 10**9
+    node.destroy_node()
