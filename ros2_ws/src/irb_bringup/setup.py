@@ -26,6 +26,7 @@ setup(
         'console_scripts': [
             'thesis_run = irb_bringup.thesis_run:main',
             'bringup = irb_bringup.bringup:main',
+            'report = irb_bringup.report:main',
         ],
     },
 )
