@@ -18,7 +18,8 @@ from pathlib import Path
 
 
 def parse_args(argv):
-    p = argparse.ArgumentParser(prog='report', description=__doc__.splitlines()[0],
+    p = argparse.ArgumentParser(prog='report', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog='example: ros2 run irb_bringup report --bag '
                                        'bags/my_run --plan plan.json --out runs/my_run')
     p.add_argument('--bag', required=True, help='bag directory (rosbag2 layout, MCAP)')

@@ -135,7 +135,7 @@ def test_report_of_a_closed_loop_run_along_a_line(loop, tmp_path, capsys):
                                                    rel=1e-9)
 
 
-def test_a_gap_is_said_and_a_missing_topic_too(loop, tmp_path, capsys):
+def test_a_gap_in_a_series_is_said(loop, tmp_path, capsys):
     res, path = loop
     t_path = res.t[res.mode == 2]
     a = float(t_path[0] + 0.5)
