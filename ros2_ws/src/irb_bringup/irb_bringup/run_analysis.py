@@ -313,7 +313,12 @@ def run_figs(run: RunData, model, path=None) -> RunFigs:
             c = (run.cam_t >= t0) & (run.cam_t <= t1)
             f.cam_t = run.cam_t[c] - t0
             f.cam_err, f.cam_s = path_errors(path, run.cam_p[c])
-    if run.plan and 't' in run.plan and len(run.plan['t']):
+    if path is not None and run.plan and len(run.plan.get('theta_dot', [])) > 1:
+        from irb_planning.plan_plot import profile_times    # TCP speed = L theta_dot / 2 pi
+        f.planned_speed = (profile_times(run.plan['theta'], run.plan['theta_dot'],
+                                         run.plan.get('theta_ddot')),
+                           path.length / (2 * np.pi) * np.asarray(run.plan['theta_dot']))
+    elif run.plan and 't' in run.plan and len(run.plan['t']):
         tp = np.asarray(run.plan['t'], float)
         qp, qdp = np.asarray(run.plan['q'], float), np.asarray(run.plan['qd'], float)
         if qp.ndim == 2 and qp.shape[1] == len(run.joint_names):
