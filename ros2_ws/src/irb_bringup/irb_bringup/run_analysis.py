@@ -131,20 +131,36 @@ def read_run(bag: str | Path, joint_names: list, plan: dict | None = None,
                        'trajectory_msgs/msg/JointTrajectory',
                        'std_msgs/msg/Float64MultiArray'])
 
-    def load(topic):
-        if topic not in sources:
-            return None, None
-        raw = read_messages(sources[topic], [topic])[topic]
-        run.topics[topic] = (str(sources[topic]), len(raw.data))
-        progress(f'{topic}: {len(raw.data)} messages'
-                 + (f' (from {sources[topic].name})' if sources[topic] != bag else ''))
-        return [store.deserialize_cdr(d, raw.msgtype) for d in raw.data], raw.t_ns
-
     if '/joint_states' not in sources:
         raise ValueError(f'bag {bag}: no /joint_states (has {sorted(sources)}): nothing to '
                          'report')
-    from irb_identification.series import read_joint_series
-    js = read_joint_series(sources['/joint_states']).select(list(joint_names))
+    wanted = ['/joint_states', '/torque_command', '/controller_state', '/camera/tcp',
+              '/electrical_power', '/planned_path', '/planned_trajectory',
+              '/planned_theta_profile']
+    raws = {}
+    for src in dict.fromkeys(sources.values()):        # one pass over each bag
+        mine = [t for t in wanted if sources.get(t) == src]
+        if mine:
+            progress(f'reading {", ".join(mine)} from {src.name}')
+            raws.update(read_messages(src, mine))
+
+    def load(topic):
+        if topic not in raws:
+            return None, None
+        raw = raws[topic]
+        run.topics[topic] = (str(sources[topic]), len(raw.data))
+        progress(f'{topic}: {len(raw.data)} messages')
+        return [store.deserialize_cdr(d, raw.msgtype) for d in raw.data], raw.t_ns
+
+    from irb_identification.series import JOINT_STATE as JS, decode_joint_states
+    raw = raws['/joint_states']
+    if raw.msgtype != JS or not raw.data:
+        raise ValueError(f'bag {bag}: /joint_states is {raw.msgtype} with {len(raw.data)} '
+                         'messages: nothing to report')
+    try:
+        js = decode_joint_states(raw.data, raw.t_ns).select(list(joint_names))
+    except ValueError as exc:
+        raise ValueError(f'bag {bag}: /joint_states: {exc}') from None
     run.topics['/joint_states'] = (str(sources['/joint_states']), len(js.t))
     progress(f'/joint_states: {len(js.t)} messages')
     run.js_t, run.q, run.qd, run.tau = js.t, js.position, js.velocity, js.effort
@@ -216,13 +232,23 @@ def _window(run: RunData) -> None:
     """The analysis window and the gaps of every series inside it."""
     t = run.js_t
     if run.mode is not None and np.any(np.isin(run.mode, (2, 3))):
-        inside = run.ctrl_t[np.isin(run.mode, (2, 3))]
-        run.window = (float(inside.min()), float(inside.max()))
+        phases = path_phases(run.ctrl_t, run.mode)
+        run.window = phases[-1]
         run.window_kind = 'controller following the plan (modes path/time)'
+        if len(phases) > 1:
+            run.notes.append(f'{len(phases)} path phases in the bag (from t = '
+                             + ', '.join(f'{a - t.min():.2f}' for a, _ in phases)
+                             + ' s after the first joint state): this report covers the last')
         after = run.mode[run.ctrl_t > run.window[1]]
         if not np.any(np.isin(after, (4, 5))):
             run.notes.append('the recording ends while the controller still follows the plan '
                              '(no hold or stop after it): the run may be cut short')
+        planned = (run.plan or {}).get('t') or []
+        if len(planned) > 1 and abs((run.window[1] - run.window[0]) - planned[-1]) > max(
+                0.1 * planned[-1], 0.2):
+            run.notes.append(f'the path phase lasts {run.window[1] - run.window[0]:.2f} s, the '
+                             f'plan {planned[-1]:.2f} s: this run may not have executed this '
+                             'plan (planned figures for comparison only)')
     else:
         run.window = (float(t.min()), float(t.max()))
         run.window_kind = 'whole recording'
@@ -235,6 +261,15 @@ def _window(run: RunData) -> None:
                      ('/electrical_power', run.power_t)):
         if ts is not None and ts.size:
             run.gaps += [(name, a, d) for a, d in find_gaps(ts, t0, t1)]
+
+
+def path_phases(t: np.ndarray, mode: np.ndarray) -> list[tuple[float, float]]:
+    """[(first, last) stamp [s]] of each stretch of consecutive controller states in path or
+    time mode (sorted stamps ``t``, modes ``mode``)."""
+    on = np.isin(mode, (2, 3)).astype(int)
+    edges = np.diff(np.concatenate([[0], on, [0]]))
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(np.flatnonzero(edges == 1),
+                                                          np.flatnonzero(edges == -1))]
 
 
 # --- figures ----------------------------------------------------------------------------------
