@@ -608,7 +608,7 @@ def per_run_reports(out: Path, executed: dict, plans: dict, paths: dict) -> list
     from irb_control.plant import PlantConfig
     from irb_description.model import RobotModel
     from irb_description.path import path_spec
-    from irb_planning.plan_plot import plan_record
+    from irb_planning.plan_plot import plan_record, write_plan_file
 
     from .run_analysis import read_run, write_run_report
     from .run_report import link_path
@@ -622,6 +622,8 @@ def per_run_reports(out: Path, executed: dict, plans: dict, paths: dict) -> list
         plan = plan_record(path_spec(paths[label]), resp.trajectory, resp.theta,
                            resp.theta_dot, resp.theta_ddot, duration_s=float(resp.duration),
                            energy_j=float(resp.energy))
+        (out / 'runs' / label).mkdir(parents=True, exist_ok=True)
+        write_plan_file(out / 'runs' / label / 'plan.json', plan)   # for `report --plan`
         run = read_run(bag, model.joint_names, plan, "the planner's answer")
         md, f = write_run_report(run, model, out / 'runs' / label,
                                  PlantConfig().camera_noise_m, f'Run {label}', paths[label])
