@@ -496,8 +496,8 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
-    from irb_description.path import CirclePath, load_path_file
-    from irb_planning.plot import plot_plan
+    from irb_description.path import CirclePath, load_path_file, path_spec
+    from irb_planning.plan_plot import plan_record, plot_plan_record
 
     from .run_report import (markdown_report, plot_runs, rectangle_section, run_figures,
                              saving_percent)
@@ -518,13 +518,12 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
              f'{p.coulomb:.2f} / {p.viscous:.2f} / {p.static:.2f}',
              f'{j.valid_range[0]:.3g}-{j.valid_range[1]:.3g}')
             for n, j, p in zip(names, ident.joints, plant.joints)]
-    resp = plans['energy_ff']
-    pts = resp.trajectory.points
-    t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in pts])
-    plan_plot = plot_plan(out / 'plots' / 'plan.png', np.array(resp.theta),
-                          np.array(resp.theta_dot), t, np.array([p.velocities for p in pts]),
-                          np.array([p.effort for p in pts]),
-                          f'energy plan: {resp.duration:.2f} s, {resp.energy:.1f} J')
+    resp = plans['energy_ff']        # the figure of `plan` (plan_plot): trapezoid, TCP speed
+    (out / 'plots').mkdir(parents=True, exist_ok=True)
+    plan_plot = plot_plan_record(out / 'plots' / 'plan.png', plan_record(
+        path_spec(CirclePath(center, radius, 0.0, 1)), resp.trajectory, resp.theta,
+        resp.theta_dot, resp.theta_ddot), f'energy plan: {resp.duration:.2f} s, '
+        f'{resp.energy:.1f} J (trapezoid {resp.baseline_energy:.1f} J)')
     plan_rows = [(k, p.energy, p.duration, np.round(p.peak_torque, 1).tolist(), p.solve_time)
                  for k, p in plans.items()]
     bags = {'identification sweeps': f'{len(sweep_bags)} bags, '

@@ -64,7 +64,8 @@ def write_bag(bag: Path, res, path, drop: tuple[float, float] | None = None) -> 
             'irb_interfaces/msg/PathSpec'](
             type='line', center=P(x=0.0, y=0.0, z=0.0), radius=0.0, start_angle=0.0,
             direction=1, normal=T['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
-            sweep=0.0, waypoints=[P(x=a[0], y=a[1], z=a[2]) for a in LINE], blend_radii=np.zeros(0),
+            sweep=0.0, waypoints=[P(x=a[0], y=a[1], z=a[2]) for a in LINE],
+            blend_radii=np.zeros(0),
             closed=False)))
         for k, ns in enumerate(t_ns):
             if keep[k]:
