@@ -28,10 +28,12 @@ def loop():
     return res, path
 
 
-def write_bag(bag: Path, res, path, drop: tuple[float, float] | None = None) -> dict:
+def write_bag(bag: Path, res, path, drop: tuple[float, float] | None = None,
+              six: bool = False) -> dict:
     """The run as the recorder would write it; /camera/tcp: the path points nearest the true
     TCP lifted by OFFSET_M along +z; /electrical_power: STANDBY_W constant on total_none.
-    ``drop``: (t0, t1) [s] of /joint_states left out. Returns the raw arrays written."""
+    ``drop``: (t0, t1) [s] of /joint_states left out; ``six``: /joint_states carries all six
+    joints (4-6 at rest, listed first). Returns the raw arrays written."""
     from irb_identification.bagio import BagWriter, TopicInfo, serialize, typestore
     from irb_identification.series import encode_joint_states
     names = ['joint_1', 'joint_2', 'joint_3']
@@ -45,8 +47,11 @@ def write_bag(bag: Path, res, path, drop: tuple[float, float] | None = None) -> 
     t_ns = START_NS + np.round(res.t * 1e9).astype(np.int64)
     keep = np.ones(len(t_ns), bool) if drop is None else ~((res.t >= drop[0])
                                                            & (res.t < drop[1]))
-    js = encode_joint_states(t_ns[keep], names, res.q_meas[keep], res.qd_meas[keep],
-                             res.tau_applied[keep])
+    arrays = [a[keep] for a in (res.q_meas, res.qd_meas, res.tau_applied)]
+    if six:
+        arrays = [np.hstack([np.zeros((len(a), 3)), a]) for a in arrays]
+    js = encode_joint_states(t_ns[keep], (['joint_4', 'joint_5', 'joint_6'] if six else [])
+                             + names, *arrays)
     empty = np.zeros(0)
     nan3 = np.full(3, np.nan)
     cam_ns = START_NS + np.round(res.cam_t * 1e9).astype(np.int64)
@@ -136,11 +141,11 @@ def test_report_of_a_closed_loop_run_along_a_line(loop, tmp_path, capsys):
                                                    rel=1e-9)
 
 
-def test_a_gap_in_a_series_is_said(loop, tmp_path, capsys):
+def test_a_gap_in_a_series_is_said_six_joints_picked_by_name(loop, tmp_path, capsys):
     res, path = loop
     t_path = res.t[res.mode == 2]
     a = float(t_path[0] + 0.5)
-    write_bag(tmp_path / 'bag', res, path, drop=(a, a + 0.1))
+    raw = write_bag(tmp_path / 'bag', res, path, drop=(a, a + 0.1), six=True)
     rc, cap = run_report(tmp_path / 'bag', tmp_path / 'out', capsys)
     assert rc == 0, cap.err
     s = json.loads((tmp_path / 'out' / 'summary.json').read_text())
@@ -148,6 +153,12 @@ def test_a_gap_in_a_series_is_said(loop, tmp_path, capsys):
     assert s['gaps'][0]['length_s'] == pytest.approx(0.1, abs=0.01)
     assert 'GAP: /joint_states misses' in cap.out
     assert 'Gaps in the recorded series' in (tmp_path / 'out' / 'report.md').read_text()
+    # six joints in /joint_states: the model's three picked by name, energy over them
+    t0, t1 = s['window_s']
+    t, p = raw['t'], np.abs(raw['tau'] * raw['qd']).sum(axis=1)
+    sel = np.flatnonzero((t >= t0) & (t <= t1))
+    own = sum(0.5 * (p[i] + p[j]) * (t[j] - t[i]) for i, j in zip(sel[:-1], sel[1:]))
+    assert s['mechanical_energy_j'] == pytest.approx(own, rel=1e-9)
 
 
 def test_a_bag_with_joint_states_only_reports_what_it_can(loop, tmp_path, capsys):
