@@ -117,13 +117,20 @@ def read_run(bag: str | Path, joint_names: list, plan: dict | None = None,
     """RunData of ``bag`` (and its ``<bag>_drive`` sibling); ``plan``: a plan file's mapping
     (overrides the plan in the bag); ``topics``: read only these. Raises bagio.BagError if
     the bag cannot be read at all, ValueError if it has no usable /joint_states."""
-    from irb_identification.bagio import bag_topics, read_messages, typestore
+    from irb_identification.bagio import bag_topics, read_messages, topic_qos, typestore
+
+    def names(b: Path):
+        # the topics from metadata.yaml: opening the bag's reader parses every split file's
+        # QoS (0.1-0.3 s per file); a missing or broken bag raises the reader's own error
+        if not (b / 'metadata.yaml').is_file():
+            return bag_topics(b)
+        return topic_qos(b)
     bag = Path(bag)
     run = RunData(str(bag), list(joint_names))
-    sources = {t: bag for t in bag_topics(bag)}
+    sources = {t: bag for t in names(bag)}
     drive = Path(str(bag) + DRIVE_SUFFIX)
     if drive.is_dir() and (drive / 'metadata.yaml').is_file():
-        for t in bag_topics(drive):
+        for t in names(drive):
             sources.setdefault(t, drive)
     if topics is not None:
         sources = {t: b for t, b in sources.items() if t in topics}
