@@ -27,6 +27,7 @@ setup(
             'thesis_run = irb_bringup.thesis_run:main',
             'bringup = irb_bringup.bringup:main',
             'ctl = irb_bringup.ctl:main',
+            'report = irb_bringup.report:main',
         ],
     },
 )

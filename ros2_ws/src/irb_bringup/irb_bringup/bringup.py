@@ -22,7 +22,8 @@ from .graph_spec import load_graph
 def main(args=None) -> int:
     from ament_index_python.packages import get_package_share_directory
     default = Path(get_package_share_directory('irb_bringup')) / 'config' / 'bringup.yaml'
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog='bringup', description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--config', default=str(default), help='graph YAML')
     a = ap.parse_args(args)
     try:

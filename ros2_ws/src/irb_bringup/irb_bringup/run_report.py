@@ -16,7 +16,6 @@ import numpy as np
 from irb_control.pd_plus import MODE_HOLD, MODE_PATH
 
 from irb_identification.bagio import read_messages, typestore
-from irb_identification.series import read_joint_series
 
 CONTROLLER_STATE = 'irb_interfaces/msg/ControllerState'
 #: [s] the largest gap between recorded samples (4.032 ms apart) a run's path phase may have:
@@ -106,30 +105,37 @@ def path_window(bag: str | Path) -> tuple[float, float]:
     return t0, t1
 
 
+def actuated_joint_names() -> list[str]:
+    """The model's actuated joints (joint_1..3): what the figures are computed on, picked by
+    name from joint states that may carry all six joints."""
+    from irb_description.model import N_ACTUATED
+    from irb_description.params import load_kinematics
+    return list(load_kinematics().joint_names[:N_ACTUATED])
+
+
 def run_figures(bag: str | Path, label: str, center: np.ndarray | None = None,
                 radius: float | None = None, path=None) -> RunFigures:
     """Figures of the path phase of one run on the circle (center, radius) or on ``path``
-    (an irb_description path); raises ValueError if the bag has no path phase."""
-    store = typestore([CONTROLLER_STATE])
-    raw = read_messages(bag, ['/camera/tcp'])
+    (an irb_description path); raises ValueError if the bag has no path phase or misses
+    samples in it. The same reading and figures as ``report`` (run_analysis)."""
+    from irb_description.path import CirclePath
+
+    from .run_analysis import mechanical_energy, path_errors, read_run
     t0, t1 = path_window(bag)
-    js = read_joint_series(bag)
-    check_gap(js.t, t0, t1, '/joint_states', bag)
-    inside = (js.t >= t0) & (js.t <= t1)
-    tau, qd = js.effort[inside], js.velocity[inside]
-    t = js.t[inside] - t0
-    power = np.abs(tau * qd).sum(axis=1)
-    cam = raw['/camera/tcp']
-    pts = [store.deserialize_cdr(d, cam.msgtype) for d in cam.data]
-    t_cam = np.array([_stamp(m) for m in pts])
-    p = np.array([[m.point.x, m.point.y, m.point.z] for m in pts]).reshape(-1, 3)
-    order = np.argsort(t_cam, kind='stable')   # camera points arrive in batches, not in order
-    t_cam, p = t_cam[order], p[order]
-    sel = (t_cam >= t0) & (t_cam <= t1)
-    err = (np.asarray(path.distance(p[sel]), float).reshape(-1) if path is not None
-           else circle_error(p[sel], np.asarray(center, float), radius))
-    return RunFigures(label, str(bag), t, power, tau, qd, t_cam[sel] - t0, err,
-                      float(np.trapezoid(power, t)), float(t1 - t0))
+    run = read_run(bag, actuated_joint_names(), topics=('/joint_states', '/camera/tcp'))
+    check_gap(run.js_t, t0, t1, '/joint_states', bag)
+    inside = (run.js_t >= t0) & (run.js_t <= t1)
+    tau, qd = run.tau[inside], run.qd[inside]
+    t = run.js_t[inside] - t0
+    if path is None:
+        path = CirclePath(np.asarray(center, float), float(radius), 0.0, 1)
+    cam_t, cam_p = ((run.cam_t, run.cam_p) if run.cam_t is not None
+                    else (np.zeros(0), np.zeros((0, 3))))
+    sel = (cam_t >= t0) & (cam_t <= t1)
+    err, _ = path_errors(path, cam_p[sel])
+    return RunFigures(label, str(bag), t, np.abs(tau * qd).sum(axis=1), tau, qd,
+                      cam_t[sel] - t0, err, mechanical_energy(run.js_t, run.tau, run.qd, t0, t1),
+                      float(t1 - t0))
 
 
 def plot_runs(runs: list[RunFigures], out_dir: Path) -> dict[str, str]:

@@ -19,7 +19,8 @@ On the simulator, each phase a node graph of separate processes (irb_control.pro
    thesis comparison, plus the electrical energy of the executed circles (the simulator's
    ``electrical_power`` in the bags, every DC-bus mode), the best placement against the
    trapezoid at the thesis placement, and per cycle and per year at the config's
-   ``duty_cycle`` (kWh and cost).
+   ``duty_cycle`` (kWh and cost); each executed run also gets its own report under
+   runs/<run id>/runs/<label>/, written by the code of ``report`` (run_analysis).
 Ctrl-C or any node's failure stops the graph cleanly; a second run never overwrites a first.
 """
 from __future__ import annotations
@@ -177,7 +178,8 @@ def main(args=None) -> int:
     from ament_index_python.packages import get_package_share_directory
     from irb_control.process_group import ProcessGroup, ProcessSpec, ros2_run_cmd
     share = Path(get_package_share_directory('irb_bringup'))
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog='thesis_run', description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--quick', action='store_true', help='short version (CI end-to-end test)')
     ap.add_argument('--config', default=str(share / 'config' / 'thesis_run.yaml'))
     ap.add_argument('--root', default=None, help='where bags/ and runs/ go (default: repo)')
@@ -494,8 +496,8 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
-    from irb_description.path import load_path_file
-    from irb_planning.plot import plot_plan
+    from irb_description.path import CirclePath, load_path_file, path_spec
+    from irb_planning.plan_plot import plan_record, plot_plan_record
 
     from .run_report import (markdown_report, plot_runs, rectangle_section, run_figures,
                              saving_percent)
@@ -516,13 +518,12 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
              f'{p.coulomb:.2f} / {p.viscous:.2f} / {p.static:.2f}',
              f'{j.valid_range[0]:.3g}-{j.valid_range[1]:.3g}')
             for n, j, p in zip(names, ident.joints, plant.joints)]
-    resp = plans['energy_ff']
-    pts = resp.trajectory.points
-    t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in pts])
-    plan_plot = plot_plan(out / 'plots' / 'plan.png', np.array(resp.theta),
-                          np.array(resp.theta_dot), t, np.array([p.velocities for p in pts]),
-                          np.array([p.effort for p in pts]),
-                          f'energy plan: {resp.duration:.2f} s, {resp.energy:.1f} J')
+    resp = plans['energy_ff']        # the figure of `plan` (plan_plot): trapezoid, TCP speed
+    (out / 'plots').mkdir(parents=True, exist_ok=True)
+    plan_plot = plot_plan_record(out / 'plots' / 'plan.png', plan_record(
+        path_spec(CirclePath(center, radius, 0.0, 1)), resp.trajectory, resp.theta,
+        resp.theta_dot, resp.theta_ddot), f'energy plan: {resp.duration:.2f} s, '
+        f'{resp.energy:.1f} J (trapezoid {resp.baseline_energy:.1f} J)')
     plan_rows = [(k, p.energy, p.duration, np.round(p.peak_torque, 1).tolist(), p.solve_time)
                  for k, p in plans.items()]
     bags = {'identification sweeps': f'{len(sweep_bags)} bags, '
@@ -559,6 +560,10 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
                                      plans['rect_trapezoid_ff'], cfg['rectangle'], rect,
                                      out / 'report.md',
                                      process_text(rectangle_process(cfg['rectangle'])))
+    paths = {k: (rect if k.startswith('rect_') else CirclePath(
+        np.asarray(centers.get(k) if centers.get(k) is not None else center, float), radius,
+        0.0, 1)) for k in executed}
+    sections += per_run_reports(out, executed, plans, paths)
     markdown_report(run_id, figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff'],
                     plots, rows, sorted(str(p) for p in (out / 'friction').glob('*.png')),
                     plan_rows, str(plan_plot), bags, notes, out / 'report.md', sections)
@@ -594,6 +599,39 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
                 f'path error mean {figs[k].err_mean_mm:.3f} mm, max {figs[k].err_max_mm:.3f} mm')
     for text in energy_summary.get('log', []):
         log(f'   {text}')
+
+
+def per_run_reports(out: Path, executed: dict, plans: dict, paths: dict) -> list[str]:
+    """Each executed run's own report under out/runs/<label>/ by the code of ``report``
+    (run_analysis), with the plan the planner answered; the Markdown lines linking them."""
+    from irb_control.plant import PlantConfig
+    from irb_description.model import RobotModel
+    from irb_description.path import path_spec
+    from irb_planning.plan_plot import plan_record, write_plan_file
+
+    from .run_analysis import read_run, write_run_report
+    from .run_report import link_path
+    model = RobotModel.load()
+    lines = ['## Per-run reports', '',
+             'Each executed run on its own, by the code of `ros2 run irb_bringup report --bag '
+             '<bag>` (planned against measured TCP path, path error along the path, tracking, '
+             'commanded against measured torque, modes, TCP speed, energy):', '']
+    for label, bag in executed.items():
+        resp = plans[label]
+        plan = plan_record(path_spec(paths[label]), resp.trajectory, resp.theta,
+                           resp.theta_dot, resp.theta_ddot, duration_s=float(resp.duration),
+                           energy_j=float(resp.energy))
+        (out / 'runs' / label).mkdir(parents=True, exist_ok=True)
+        write_plan_file(out / 'runs' / label / 'plan.json', plan)   # for `report --plan`
+        run = read_run(bag, model.joint_names, plan, "the planner's answer")
+        md, f = write_run_report(run, model, out / 'runs' / label,
+                                 PlantConfig().camera_noise_m, f'Run {label}', paths[label])
+        cam = ('' if f.cam_err is None or not f.cam_err.size
+               else f', camera path error mean {1e3 * f.cam_err.mean():.3f} mm')
+        gaps = f', {len(run.gaps)} gap(s) in the recording' if run.gaps else ''
+        lines.append(f'- [{label}]({link_path(md, out)}): {f.duration:.2f} s, '
+                     f'{f.energy:.1f} J mechanical{cam}{gaps}')
+    return lines + ['']
 
 
 def energy_sections(out, cfg, executed, figs, plans, placement, plant_el):

@@ -221,6 +221,17 @@ def test_quick_pipeline_end_to_end(tmp_path):
         assert s[run]['path_error_mean_mm'] < 0.5 * s['energy_noff']['path_error_mean_mm'], \
             (run, s[run], s['energy_noff'])
     assert (out / 'plots' / 'rectangle' / 'path_error.png').stat().st_size > 10_000
+    # every executed run has its own report by the code of `report`, linked from the main
+    # one, with the same mechanical energy and camera path error as the main report's
+    assert '## Per-run reports' in report
+    for run in ('energy_ff', 'trapezoid_ff', 'energy_noff', 'rect_energy_ff',
+                'rect_trapezoid_ff', 'best_energy_ff'):
+        assert f'](runs/{run}/report.md)' in report, run
+        own = json.loads((out / 'runs' / run / 'summary.json').read_text())
+        assert own['mechanical_energy_j'] == pytest.approx(s[run]['energy_j'], rel=1e-9), run
+        assert own['camera_path_error_mean_mm'] == pytest.approx(
+            s[run]['path_error_mean_mm'], rel=1e-9), run
+        assert (out / 'runs' / run / 'path_error.png').stat().st_size > 10_000
     # both rectangle plans kept the configured gluing band as played (the planner's check)
     band = s['rectangle_process']
     assert 'Process constraints of both plans: bead speed' in report

@@ -38,7 +38,7 @@ from irb_interfaces.srv import PlanPath
 
 from .costs import time_weight
 from .messages import path_msg_from_spec
-from .plot import plot_plan
+from .plan_plot import save_plan_outputs
 from .service_call import call_service
 
 
@@ -77,7 +77,8 @@ def parse_args(argv):
                        'block, else none)')
     p.add_argument('--service', default='plan_path')
     p.add_argument('--timeout', type=float, default=120.0, help='[s]')
-    p.add_argument('--plot', default='plan.png', help="PNG path, '' = no plot")
+    p.add_argument('--plot', default='plan.png',
+                   help="PNG path, '' = no plot; the plan file goes beside it (.json)")
     p.add_argument('--verdict-timeout', type=float, default=30.0,
                    help='[s] wait this long for the verdict of a listening controller '
                         '(pdplus ~/plan_status); 0 = do not wait')
@@ -237,15 +238,7 @@ def main(args=None):
             return 1
         print(summary(resp))
         if a.plot:
-            pts = resp.trajectory.points
-            t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
-                          for p in pts])
-            qd = np.array([p.velocities for p in pts])
-            tau = np.array([p.effort for p in pts])
-            out = plot_plan(a.plot, np.array(resp.theta), np.array(resp.theta_dot), t, qd,
-                            tau, f'{a.objective}: {resp.duration:.2f} s, {resp.energy:.1f} J '
-                            f'(trapezoid {resp.baseline_energy:.1f} J)')
-            print(f'plot: {out}')
+            print(save_plan_outputs(a.plot, resp, request.path, a.objective))
         if a.verdict_timeout <= 0:
             return 0
         return wait_for_verdict(resp.trajectory.header.stamp, a.verdict_timeout,
