@@ -46,6 +46,9 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
                             SolveRequest, TcpPath, Transcription)
+from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
+                                              MIN_POINT_SPACING_S, STAMP_RESOLUTION_S,
+                                              spaced, stamps_ns, worst_inconsistency)
 from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve, TcpBand,
                      Verification, verify_plan)
 
@@ -65,6 +68,10 @@ class PlannerSettings:
     warm_start: bool = True
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
+    # the independent check plays the message by quintic interpolation at this rate (and at
+    # least 8 samples per interval): the reported peaks are the played ones
+    play_rate_hz: float = 10000.0
+    min_point_spacing_s: float = MIN_POINT_SPACING_S   # between message points
     cache_size: int = 8                  # built problems kept (LRU)
     memory_limit_mib: float = 400.0      # drop least recently used problems above this RSS
     friction_map_dirs: tuple = ()        # where maps may be read from; () = default_map_dirs()
@@ -127,6 +134,9 @@ class Planner:
         self.settings = settings or PlannerSettings()
         if not self.settings.min_theta_dot_rad_s > 0:
             raise ValueError('min_theta_dot_rad_s must be > 0 (the controller must not stall)')
+        if not self.settings.min_point_spacing_s > 0:
+            raise ValueError('min_point_spacing_s must be > 0 (message points microseconds '
+                             'apart are played with accelerations the plan does not have)')
         self._model_lock = threading.Lock()
         self._cache: OrderedDict = OrderedDict()
         self._cache_lock = threading.Lock()
@@ -594,27 +604,31 @@ class Planner:
             frac = np.arange(m) / m
             theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
                               nodes[-1])
-            theta = split_at_breaks(theta, path.breaks)
-            t, td, tdd = profile.theta_at(theta)
+            t, theta, td, tdd = message_points(profile, theta, path.breaks,
+                                               s.min_point_spacing_s)
             jp = sample(theta)
             qd = jp.dq * td[:, None]
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
-                              req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
+                              req.boundary == BOUNDARY_REST, s.play_rate_hz,
                               path_tolerance_m=s.path_tolerance_m,
-                              electrical=self.electrical, band=request_band(req))
+                              electrical=self.electrical, band=request_band(req),
+                              stamp_resolution_s=STAMP_RESOLUTION_S)
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
             played_limit = any(' torque ' in p or ' speed ' in p for p in ver.problems)
-            # (the thesis circle keeps its messages to the bit: not applied to CirclePath,
-            # whose messages at N = 200 would get more points under this half-tolerance rule)
-            consistent = type(path) is CirclePath or rates_consistent(t, jp.q, qd, qdd)
+            bad = worst_inconsistency(t, jp.q, qd, qdd, 0.5 * CONSISTENCY_RTOL,
+                                      0.5 * CONSISTENCY_ATOL)
             if ((ver.max_path_deviation <= 0.5 * s.path_tolerance_m and not played_limit
-                 and consistent)
+                 and bad is None)
                     or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points):
                 break
             m *= 2
+        if bad is not None:         # what a consumer's plan gate would refuse: not a success
+            ver.problems.append(f'inconsistent {bad.what}: joint {bad.joint + 1} at point '
+                                f'{bad.point} (t = {t[bad.point]:.4f} s): {bad.detail()} '
+                                '(half the tolerances of irb_description.trajectory_rules)')
         tau = torque(jp.q, qd, qdd)
         return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}, ver
 
@@ -752,36 +766,34 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
     return fix
 
 
-def rates_consistent(t, q, qd, qdd, rtol: float = 0.025, atol: float = 1e-4) -> bool:
-    """True if between every two message points the mean rate of q and of qd lies between
-    the rates declared at the two points, within half the tolerances of pdplus's plan gate
-    (irb_control plan_checks: mean-value rule, rtol 0.05, atol 2e-4): a consumer that checks
-    the message that way accepts it. Where it does not hold (an acceleration that dips
-    inside a long interval through a tight blend), the planner adds points."""
-    d = np.diff(t)[:, None]
-    for x, v in ((q, qd), (qd, qdd)):
-        rate = np.diff(x, axis=0) / d
-        lo, hi = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
-        excess = np.maximum(lo - rate, rate - hi).clip(min=0.0) * d
-        if np.any(excess > atol + rtol * np.maximum(np.abs(v[:-1]), np.abs(v[1:])) * d):
-            return False
-    return True
+def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
+                   min_spacing: float) -> tuple[np.ndarray, ...]:
+    """The trajectory message's points from candidate path parameters ``theta`` (increasing,
+    0 .. 2 pi): (t [s] as the message stamps them, theta, theta_dot, theta_ddot).
 
-
-def split_at_breaks(theta: np.ndarray, breaks: np.ndarray, frac: float = 1e-3) -> np.ndarray:
-    """Message points ``theta`` with every interior point that sits on a piece end (where
-    Phi'' jumps) replaced by two, ``frac`` of the shorter neighbouring interval before and
-    after it: each interval between points then lies in one piece, so the accelerations
-    declared at its two ends are its own (a controller's or plan gate's consistency rule
-    between velocities and accelerations holds), and the jump happens between the twins."""
+    * every interior candidate on a piece end (where Phi'' jumps: a blend's end) is replaced
+      by two points half ``min_spacing`` (+0.1 %) of time before and after it: each interval
+      but the one between them lies in one piece, so the accelerations declared at its ends
+      are its own, and the jump is played as the quintic between the twins spreads it;
+    * points closer than ``min_spacing`` [s] to the previous one are dropped
+      (``trajectory_rules.spaced``): a controller's quintic between points microseconds
+      apart turns the stamps' nanosecond resolution into acceleration (issue 28);
+    * times rounded to 1 ns, as ``time_from_start`` carries them: the independent check
+      plays exactly what a controller receives (the points keep their exact theta; the
+      <= 0.5 ns this moves a stamp is in the check)."""
     breaks = np.asarray(breaks, float)
     on = np.isin(theta, breaks)
     on[[0, -1]] = False
-    if not np.any(on):
-        return theta
-    k = np.flatnonzero(on)
-    eps = frac * np.minimum(theta[k] - theta[k - 1], theta[k + 1] - theta[k])
-    return np.sort(np.concatenate([theta[~on], theta[k] - eps, theta[k] + eps]))
+    if np.any(on):
+        t_b = profile.theta_at(theta[on])[0]
+        half = 0.5 * min_spacing * (1 + 1e-3)
+        twins = np.concatenate([profile.sample(t_b - half)[0], profile.sample(t_b + half)[0]])
+        theta = np.unique(np.concatenate([theta[~on], twins]))
+    t = profile.theta_at(theta)[0]
+    keep = spaced(t, min_spacing)
+    theta = theta[keep]
+    t, td, tdd = profile.theta_at(theta)
+    return stamps_ns(t), theta, td, tdd
 
 
 def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:
