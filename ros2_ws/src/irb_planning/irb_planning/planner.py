@@ -494,7 +494,7 @@ class Planner:
         band = request_band(req)
         t_max = self.max_duration(entry, base.min_theta_dot)
         if band is not None:
-            check_band_fits(req, path, entry, t_max)
+            check_band_fits(req, path, entry, t_max, checked.velocity)
         try:
             t_min, t_out = self.min_duration(
                 entry, base, checked, check, band,
@@ -692,14 +692,23 @@ def _band_error(exc: PlanError, band: TcpBand | None, what: str = 'of this durat
     if band is None or 'cannot all be met' not in exc.message:
         return exc
     return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
-                     f'{band_text(band)} together with the robot limits ({exc.message})')
+                     f'{band_text(band)} together with the robot limits ({exc.message}; no '
+                     'single bound is broken on its own: the ramp acceleration v_min^2 / '
+                     '(2 r), the bends\' centripetal acceleration and the joint speeds at '
+                     'the floor all fit, so it is their combination with the torque limits '
+                     'and the duration)')
 
 
-def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float) -> None:
+def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float,
+                    velocity_limit: np.ndarray | None = None) -> None:
     """Refuse (code 3, one line) process constraints this path and duration cannot meet
-    before any solve: a duration below length / tcp_speed_max, or above what the speed floor
-    allows; a floor at which the centripetal acceleration in a bend away from the rest ends
-    exceeds tcp_accel_max; rest ramps shorter than the grid's first interval."""
+    before any solve, each with its certificate (the bound that is broken and by how much):
+    a duration below length / tcp_speed_max, or above what the speed floor allows; rest
+    ramps too short to reach tcp_speed_min at tcp_accel_max (v_min^2 / (2 r) > a_max); a
+    floor at which the centripetal acceleration in a bend away from the rest ends exceeds
+    tcp_accel_max; a floor that needs a joint faster than its speed limit
+    (``velocity_limit`` (n,) [rad/s], the limits checked); rest ramps shorter than the grid's
+    first interval."""
     L = path.length
     T = req.duration
     rest = req.boundary == BOUNDARY_REST
@@ -724,15 +733,33 @@ def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: floa
     if rest and r <= sig[1] * (1 + 1e-12):
         no(f'tcp_ramp_length {r * 1e3:.2f} mm is within the first grid interval '
            f'({sig[1] * 1e3:.2f} mm at {sig.size} nodes): no room to reach tcp_speed_min')
+    zone = (sig >= r) & (sig <= L - r) if rest else np.ones(sig.size, bool)
+    s1 = np.sum(tcp.d1_nodes ** 2, axis=1)
     if amax > 0:
-        zone = (sig >= r) & (sig <= L - r) if rest else np.ones(sig.size, bool)
-        s1 = np.sum(tcp.d1_nodes ** 2, axis=1)
         kappa = np.linalg.norm(tcp.d2_nodes, axis=1) / s1          # curvature [1/m]
         k = int(np.argmax(np.where(zone, kappa, 0.0)))
         if zone[k] and vmin ** 2 * kappa[k] > amax:
             no(f'at tcp_speed_min {vmin:g} m/s the centripetal acceleration in the bend of '
                f'radius {1e3 / kappa[k]:.1f} mm ({sig[k] * 1e3:.0f} mm along the path) is '
-               f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2')
+               f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2 (by '
+               f'{100 * (vmin ** 2 * kappa[k] / amax - 1):.1f} %)')
+    if rest and amax > 0 and vmin ** 2 / (2 * r) > amax:
+        need = vmin ** 2 / (2 * r)
+        no(f'reaching tcp_speed_min {vmin:g} m/s within the {r * 1e3:.1f} mm rest ramps '
+           f'needs a TCP acceleration of at least v^2 / (2 r) = {need:.4g} m/s^2 > '
+           f'tcp_accel_max {amax:g} m/s^2 (by {100 * (need / amax - 1):.1f} %); ramps of '
+           f'at least {vmin ** 2 / (2 * amax) * 1e3:.1f} mm fit')
+    if velocity_limit is not None:        # joint speeds the floor needs: v |dq/dsigma|
+        frac = (np.clip(np.minimum(sig, L - sig) / r, 0.0, 1.0) if rest
+                else np.ones(sig.size))
+        need = (vmin * np.sqrt(frac) / np.sqrt(s1))[:, None] * np.abs(entry.nodes.dq)
+        ratio = need / np.asarray(velocity_limit, float)[None, :]
+        k, i = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        if ratio[k, i] > 1.0:
+            no(f'at tcp_speed_min {vmin:g} m/s joint {i + 1} must turn at '
+               f'{need[k, i]:.3f} rad/s {sig[k] * 1e3:.0f} mm along the path, above its '
+               f'speed limit {velocity_limit[i]:.3f} rad/s (by '
+               f'{100 * (ratio[k, i] - 1):.1f} %)')
 
 
 def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) -> dict:
