@@ -31,6 +31,10 @@ STAMP_RESOLUTION_S = 1e-9
 #: (positions vs velocities) or [rad/s] (velocities vs accelerations)
 CONSISTENCY_RTOL = 0.05
 CONSISTENCY_ATOL = 2e-4
+#: a consumer's further limits on a plan (pdplus's plan gate defaults): |qdd| of any joint
+#: [rad/s^2] and the feed-forward torque's share of the torque limit at the points
+GATE_MAX_ACCELERATION_RAD_S2 = 50.0
+GATE_TORQUE_FRACTION = 0.9
 
 
 @dataclass(frozen=True)
@@ -77,6 +81,27 @@ def worst_inconsistency(t, q, qd, qdd, rtol: float = CONSISTENCY_RTOL,
                                       float(d[k, 0]), float(excess[k, i]),
                                       float(allowed[k, i]))
     return worst
+
+
+def gate_limit_notes(qdd, tau, torque_limit,
+                     max_acceleration: float = GATE_MAX_ACCELERATION_RAD_S2,
+                     torque_fraction: float = GATE_TORQUE_FRACTION) -> list[str]:
+    """One line per limit a plan gate with these defaults would refuse at the points:
+    qdd, tau (N, n) at the message points [rad/s^2, N m]; torque_limit (n,) [N m]."""
+    out = []
+    qdd, tau = np.abs(np.asarray(qdd, float)), np.abs(np.asarray(tau, float))
+    k, i = np.unravel_index(int(np.argmax(qdd)), qdd.shape)
+    if qdd[k, i] > max_acceleration:
+        out.append(f'|qdd| of joint {i + 1} reaches {qdd[k, i]:.3g} rad/s^2 at point {k} '
+                   f'(a plan gate limiting it to {max_acceleration:g} refuses it)')
+    share = tau / np.asarray(torque_limit, float)[None, :]
+    k, i = np.unravel_index(int(np.argmax(share)), share.shape)
+    if share[k, i] > torque_fraction:
+        out.append(f'the torque of joint {i + 1} reaches {share[k, i]:.1%} of its limit at '
+                   f'point {k} (a plan gate keeping {torque_fraction:.0%} for feedback '
+                   'refuses it; ask for limit_scaling <= '
+                   f'{torque_fraction / share[k, i]:.3f})')
+    return out
 
 
 def stamps_ns(t) -> np.ndarray:

@@ -48,7 +48,8 @@ from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENE
                             SolveRequest, TcpPath, Transcription)
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, STAMP_RESOLUTION_S,
-                                              spaced, stamps_ns, worst_inconsistency)
+                                              gate_limit_notes, spaced, stamps_ns,
+                                              worst_inconsistency)
 from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve, TcpBand,
                      Verification, verify_plan)
 
@@ -564,6 +565,8 @@ class Planner:
             notes.append('min_duration is the optimiser\'s time-optimal duration, its profile '
                          'not played and checked (the request is >= '
                          f'{s.min_duration_check_factor:g} x longer)')
+        notes += ['pdplus gate: ' + n for n in gate_limit_notes(
+            trajectory['qdd'], trajectory['tau'], checked.torque)]
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
             notes.append('periodic profile: starts and ends at theta_dot = '
                          f'{profile.theta_dot[0]:.3f} rad/s')
