@@ -119,19 +119,27 @@ def closest_points(t) -> tuple[int, float]:
     return k, float(dt[k])
 
 
-def spaced(t, min_spacing: float = MIN_POINT_SPACING_S) -> np.ndarray:
+def spaced(t, min_spacing: float = MIN_POINT_SPACING_S, priority=None) -> np.ndarray:
     """Indices of the points of ``t`` (N,) [s] (increasing) to keep so that consecutive kept
-    points are at least ``min_spacing`` apart (minus half a stamp resolution): the first and
-    the last are always kept; walking forward, a point closer than ``min_spacing`` to the
-    last kept one is dropped, and if the last point is too close to the one kept before it,
-    that one is dropped instead."""
+    points are at least ``min_spacing`` apart (minus half a stamp resolution). The first and
+    the last are always kept; then, by decreasing ``priority`` (N,) (None: all equal) and
+    in time order within a level, a point is kept if it is at least ``min_spacing`` from
+    every point kept so far. The caller ranks the points it must not lose (e.g. where an
+    acceleration peaks: the mean-value rule holds only for rates monotone within an
+    interval) above those it added for density."""
+    import bisect
     t = np.asarray(t, float)
+    n = t.size
+    if n <= 2:
+        return np.arange(n)
     tol = min_spacing - 0.5 * STAMP_RESOLUTION_S
-    keep = [0]
-    for k in range(1, t.size - 1):
-        if t[k] - t[keep[-1]] >= tol:
-            keep.append(k)
-    while len(keep) > 1 and t[-1] - t[keep[-1]] < tol:
-        keep.pop()
-    keep.append(t.size - 1)
-    return np.asarray(keep, int)
+    pr = np.zeros(n) if priority is None else np.asarray(priority, float)
+    kept_t, kept = [t[0], t[-1]], [0, n - 1]
+    if t[-1] - t[0] < tol:
+        return np.array([0, n - 1])
+    for k in np.lexsort((np.arange(1, n - 1), -pr[1:-1])) + 1:
+        j = bisect.bisect_left(kept_t, t[k])
+        if t[k] - kept_t[j - 1] >= tol and kept_t[j] - t[k] >= tol:
+            kept_t.insert(j, t[k])
+            kept.insert(j, int(k))
+    return np.asarray(kept, int)

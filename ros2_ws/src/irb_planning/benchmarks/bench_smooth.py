@@ -82,8 +82,9 @@ def analyse(model, res, req) -> dict:
         'joint_speed_ratio': float((np.abs(p.qd).max(axis=0) / lim.velocity).max()),
         'torque_ratio': float((np.abs(p.tau).max(axis=0) / lim.torque).max()),
         'joint_accel_peak_rad_s2': float(np.abs(p.qdd).max()),
+        # reported - played peak torque, as a share of the torque limit (worst joint)
         'reported_vs_played_torque': float(np.max(np.abs(ver.peak_torque - np.abs(p.tau).max(
-            axis=0)) / np.abs(p.tau).max(axis=0))),
+            axis=0)) / lim.torque)),
         'energy_j': float(res.evaluation.energy),
     }
     if req.tcp_accel_max > 0:
@@ -108,8 +109,11 @@ def analyse(model, res, req) -> dict:
 def band_for(req: PlanRequest, res, rng) -> dict:
     """Process constraints around the plan's mean TCP speed."""
     mean = request_path(req).length / res.evaluation.duration
-    return dict(tcp_speed_min=0.6 * mean, tcp_speed_max=1.4 * mean,
-                tcp_accel_max=float(rng.uniform(1.0, 4.0)))
+    amax = float(rng.uniform(1.0, 4.0))
+    length = request_path(req).length
+    ramp = min((0.6 * mean) ** 2 / amax, 0.2 * length)      # the default, or 20 % of a short path
+    return dict(tcp_speed_min=0.6 * mean, tcp_speed_max=1.4 * mean, tcp_accel_max=amax,
+                tcp_ramp_length=ramp)
 
 
 def periodic_vs_rest(planner, rng, count: int) -> list:
@@ -123,7 +127,9 @@ def periodic_vs_rest(planner, rng, count: int) -> list:
         except PlanError:
             continue
         row = {}
-        for b in ('rest', 'periodic'):
+        for b in ('rest', 'periodic'):        # each from scratch: problem built, T_min solved
+            with planner._cache_lock:
+                planner._cache.clear()
             r = replace(req, duration=1.5 * t_min, boundary='' if b == 'rest' else b)
             w, c = time.perf_counter(), time.process_time()
             try:

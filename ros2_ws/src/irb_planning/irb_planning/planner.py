@@ -407,10 +407,14 @@ class Planner:
             raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
                             f'time-optimal problem: {exc.message}') from None
         ev, _, ver = out[2]
-        if ev.violations or not ver.ok:
+        # the message's consistency matters where the time-optimal plan is the answer; for
+        # another objective only its duration is used (a time-optimal profile on a fine grid
+        # may switch its acceleration faster than 1 ms points can declare)
+        problems = [p for p in ver.problems if far <= 0 or not p.startswith('inconsistent')]
+        if ev.violations or problems:
             raise PlanError(ERROR_SOLVER, 'the time-optimal profile fails the checks after '
                             f'{self.settings.adapt_rounds} tightened re-solves: '
-                            + '; '.join(ev.violations + ver.problems))
+                            + '; '.join(ev.violations + problems))
         value = (out[1].duration, out)
         with entry.lock:
             entry.min_duration[key] = value
@@ -607,9 +611,8 @@ class Planner:
             frac = np.arange(m) / m
             theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
                               nodes[-1])
-            t, theta, td, tdd = message_points(profile, theta, path.breaks,
-                                               s.min_point_spacing_s)
-            jp = sample(theta)
+            t, theta, td, tdd, jp = message_points(profile, theta, path.breaks,
+                                                   s.min_point_spacing_s, sample)
             qd = jp.dq * td[:, None]
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
@@ -797,17 +800,19 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
 
 
 def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
-                   min_spacing: float) -> tuple[np.ndarray, ...]:
+                   min_spacing: float, sample) -> tuple:
     """The trajectory message's points from candidate path parameters ``theta`` (increasing,
-    0 .. 2 pi): (t [s] as the message stamps them, theta, theta_dot, theta_ddot).
+    0 .. 2 pi): (t [s] as the message stamps them, theta, theta_dot, theta_ddot, the
+    JointPath ``sample(theta)`` at them).
 
     * every interior candidate on a piece end (where Phi'' jumps: a blend's end) is replaced
       by two points half ``min_spacing`` (+0.1 %) of time before and after it: each interval
       but the one between them lies in one piece, so the accelerations declared at its ends
       are its own, and the jump is played as the quintic between the twins spreads it;
-    * points closer than ``min_spacing`` [s] to the previous one are dropped
-      (``trajectory_rules.spaced``): a controller's quintic between points microseconds
-      apart turns the stamps' nanosecond resolution into acceleration (issue 28);
+    * no two points closer than ``min_spacing`` [s] (``trajectory_rules.spaced``, points
+      where a joint acceleration peaks or dips kept first, then nodes): a controller's
+      quintic between points microseconds apart turns the stamps' nanosecond resolution
+      into acceleration (issue 28);
     * times rounded to 1 ns, as ``time_from_start`` carries them: the independent check
       plays exactly what a controller receives (the points keep their exact theta; the
       <= 0.5 ns this moves a stamp is in the check)."""
@@ -819,11 +824,20 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
         half = 0.5 * min_spacing * (1 + 1e-3)
         twins = np.concatenate([profile.sample(t_b - half)[0], profile.sample(t_b + half)[0]])
         theta = np.unique(np.concatenate([theta[~on], twins]))
-    t = profile.theta_at(theta)[0]
-    keep = spaced(t, min_spacing)
-    theta = theta[keep]
     t, td, tdd = profile.theta_at(theta)
-    return stamps_ns(t), theta, td, tdd
+    jp = sample(theta)
+    qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
+    # keep first where a joint's acceleration peaks or dips (an interval across such a point
+    # breaks the mean-value rule of the consistency check: a time-optimal profile's switches,
+    # nodes closer than min_spacing on a fine grid), then the profile's nodes, then the rest
+    ext = np.zeros(theta.size, bool)
+    d = np.diff(qdd, axis=0)
+    ext[1:-1] = np.any(d[:-1] * d[1:] <= 0, axis=1)
+    node = np.isin(theta, profile.theta)
+    keep = spaced(t, min_spacing, node.astype(float) + 2.0 * ext)
+    theta = theta[keep]
+    jp = JointPath(theta, jp.q[keep], jp.dq[keep], jp.ddq[keep])
+    return stamps_ns(t[keep]), theta, td[keep], tdd[keep], jp
 
 
 def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:
