@@ -8,8 +8,8 @@ TCP rates and torques).
 Per request: a path type in turn (circle, line, arc, polyline, spline), its geometry drawn at
 random in the reachable workspace (code 2 redraws), the time-optimal plan (T_min), then an
 energy plan at a duration uniform in [1.2, 2.5] T_min, every other one with process
-constraints (speed band 0.6 .. 1.4 x the mean TCP speed, |a| <= uniform [1, 4] m/s^2,
-default ramps). Both plans are successes to check (or refusals to record).
+constraints (speed band 0.5 .. 2 x the mean TCP speed, |a| <= uniform [1, 4] m/s^2 or
+twice the floor's centripetal acceleration, default ramps). Both plans are successes to check (or refusals to record).
 
 Figures: per limit the worst played / limit ratio (goal <= 1.00); the smallest point spacing;
 full-tolerance consistency (irb_description.trajectory_rules) of every message; reported vs
@@ -107,12 +107,21 @@ def analyse(model, res, req) -> dict:
 
 
 def band_for(req: PlanRequest, res, rng) -> dict:
-    """Process constraints around the plan's mean TCP speed."""
-    mean = request_path(req).length / res.evaluation.duration
-    amax = float(rng.uniform(1.0, 4.0))
-    length = request_path(req).length
-    ramp = min((0.6 * mean) ** 2 / amax, 0.2 * length)      # the default, or 20 % of a short path
-    return dict(tcp_speed_min=0.6 * mean, tcp_speed_max=1.4 * mean, tcp_accel_max=amax,
+    """Process constraints a motion of this duration can keep: the floor at half and the
+    ceiling at twice the mean TCP speed, |a| <= uniform [1, 4] m/s^2 but at least twice
+    the centripetal acceleration at the floor in the tightest bend (else the request is
+    refused by its certificate, which is not what this measures), default ramps or 20 % of
+    a short path."""
+    path = request_path(req)
+    length = path.length
+    mean = length / res.evaluation.duration
+    th = np.linspace(0.0, 2 * np.pi, 2001)
+    kappa = float(np.max(np.linalg.norm(path.dd_point(th), axis=1)
+                         / np.sum(path.d_point(th) ** 2, axis=1)))
+    vmin = 0.5 * mean
+    amax = max(float(rng.uniform(1.0, 4.0)), 2.0 * vmin ** 2 * kappa)
+    ramp = min(vmin ** 2 / amax, 0.2 * length)
+    return dict(tcp_speed_min=vmin, tcp_speed_max=2.0 * mean, tcp_accel_max=amax,
                 tcp_ramp_length=ramp)
 
 
