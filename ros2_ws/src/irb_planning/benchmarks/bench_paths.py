@@ -98,7 +98,7 @@ STAGES = [('planner.py', '_plan'), ('planner.py', '_solve_checked'),
           ('evaluator.py', 'evaluate'), ('verify.py', 'verify_plan'),
           ('verify.py', 'profile_segment_time'), ('verify.py', 'quintic'),
           ('verify.py', 'deviation'), ('planner.py', 'rigid_torque'),
-          ('planner.py', 'rates_consistent'), ('path.py', 'joint_path'),
+          ('trajectory_rules.py', 'worst_inconsistency'), ('path.py', 'joint_path'),
           ('profile.py', 'theta_at'), ('planner.py', 'evaluate')]
 
 

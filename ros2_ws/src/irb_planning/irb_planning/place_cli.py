@@ -235,7 +235,8 @@ def main(args=None):
         return ask_node(a, region, args)
     from .planner import Planner, PlannerSettings
     planner = Planner(settings=PlannerSettings(
-        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
+        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
+        play_rate_hz=PlannerSettings().evaluation_rate_hz))   # as the node's search
     task = PlanRequest(radius=a.radius, direction=a.direction, duration=a.duration,
                        energy_model=a.energy_model, grid_size=a.grid,
                        start_angle=a.start_angle, friction_map=a.friction_map)

@@ -46,6 +46,10 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
 from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
                             SolveRequest, TcpPath, Transcription)
+from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
+                                              MIN_POINT_SPACING_S, STAMP_RESOLUTION_S,
+                                              gate_limit_notes, spaced, stamps_ns,
+                                              worst_inconsistency)
 from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve, TcpBand,
                      Verification, verify_plan)
 
@@ -65,6 +69,10 @@ class PlannerSettings:
     warm_start: bool = True
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
+    # the independent check plays the message by quintic interpolation at this rate (and at
+    # least 8 samples per interval): the reported peaks are the played ones
+    play_rate_hz: float = 10000.0
+    min_point_spacing_s: float = MIN_POINT_SPACING_S   # between message points
     cache_size: int = 8                  # built problems kept (LRU)
     memory_limit_mib: float = 400.0      # drop least recently used problems above this RSS
     friction_map_dirs: tuple = ()        # where maps may be read from; () = default_map_dirs()
@@ -127,6 +135,9 @@ class Planner:
         self.settings = settings or PlannerSettings()
         if not self.settings.min_theta_dot_rad_s > 0:
             raise ValueError('min_theta_dot_rad_s must be > 0 (the controller must not stall)')
+        if not self.settings.min_point_spacing_s > 0:
+            raise ValueError('min_point_spacing_s must be > 0 (message points microseconds '
+                             'apart are played with accelerations the plan does not have)')
         self._model_lock = threading.Lock()
         self._cache: OrderedDict = OrderedDict()
         self._cache_lock = threading.Lock()
@@ -396,10 +407,14 @@ class Planner:
             raise PlanError(ERROR_INFEASIBLE_DURATION if infeasible else ERROR_SOLVER,
                             f'time-optimal problem: {exc.message}') from None
         ev, _, ver = out[2]
-        if ev.violations or not ver.ok:
+        # the message's consistency matters where the time-optimal plan is the answer; for
+        # another objective only its duration is used (a time-optimal profile on a fine grid
+        # may switch its acceleration faster than 1 ms points can declare)
+        problems = [p for p in ver.problems if far <= 0 or not p.startswith('inconsistent')]
+        if ev.violations or problems:
             raise PlanError(ERROR_SOLVER, 'the time-optimal profile fails the checks after '
                             f'{self.settings.adapt_rounds} tightened re-solves: '
-                            + '; '.join(ev.violations + ver.problems))
+                            + '; '.join(ev.violations + problems))
         value = (out[1].duration, out)
         with entry.lock:
             entry.min_duration[key] = value
@@ -484,7 +499,7 @@ class Planner:
         band = request_band(req)
         t_max = self.max_duration(entry, base.min_theta_dot)
         if band is not None:
-            check_band_fits(req, path, entry, t_max)
+            check_band_fits(req, path, entry, t_max, checked.velocity)
         try:
             t_min, t_out = self.min_duration(
                 entry, base, checked, check, band,
@@ -554,6 +569,8 @@ class Planner:
             notes.append('min_duration is the optimiser\'s time-optimal duration, its profile '
                          'not played and checked (the request is >= '
                          f'{s.min_duration_check_factor:g} x longer)')
+        notes += ['pdplus gate: ' + n for n in gate_limit_notes(
+            trajectory['qdd'], trajectory['tau'], checked.torque)]
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
             notes.append('periodic profile: starts and ends at theta_dot = '
                          f'{profile.theta_dot[0]:.3f} rad/s')
@@ -594,27 +611,30 @@ class Planner:
             frac = np.arange(m) / m
             theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
                               nodes[-1])
-            theta = split_at_breaks(theta, path.breaks)
-            t, td, tdd = profile.theta_at(theta)
-            jp = sample(theta)
+            t, theta, td, tdd, jp = message_points(profile, theta, path.breaks,
+                                                   s.min_point_spacing_s, sample)
             qd = jp.dq * td[:, None]
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
-                              req.boundary == BOUNDARY_REST, s.evaluation_rate_hz,
+                              req.boundary == BOUNDARY_REST, s.play_rate_hz,
                               path_tolerance_m=s.path_tolerance_m,
-                              electrical=self.electrical, band=request_band(req))
+                              electrical=self.electrical, band=request_band(req),
+                              stamp_resolution_s=STAMP_RESOLUTION_S)
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
             played_limit = any(' torque ' in p or ' speed ' in p for p in ver.problems)
-            # (the thesis circle keeps its messages to the bit: not applied to CirclePath,
-            # whose messages at N = 200 would get more points under this half-tolerance rule)
-            consistent = type(path) is CirclePath or rates_consistent(t, jp.q, qd, qdd)
+            bad = worst_inconsistency(t, jp.q, qd, qdd, 0.5 * CONSISTENCY_RTOL,
+                                      0.5 * CONSISTENCY_ATOL)
             if ((ver.max_path_deviation <= 0.5 * s.path_tolerance_m and not played_limit
-                 and consistent)
+                 and bad is None)
                     or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points):
                 break
             m *= 2
+        if bad is not None:         # what a consumer's plan gate would refuse: not a success
+            ver.problems.append(f'inconsistent {bad.what}: joint {bad.joint + 1} at point '
+                                f'{bad.point} (t = {t[bad.point]:.4f} s): {bad.detail()} '
+                                '(half the tolerances of irb_description.trajectory_rules)')
         tau = torque(jp.q, qd, qdd)
         return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}, ver
 
@@ -678,14 +698,23 @@ def _band_error(exc: PlanError, band: TcpBand | None, what: str = 'of this durat
     if band is None or 'cannot all be met' not in exc.message:
         return exc
     return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
-                     f'{band_text(band)} together with the robot limits ({exc.message})')
+                     f'{band_text(band)} together with the robot limits ({exc.message}; no '
+                     'single bound is broken on its own: the ramp acceleration v_min^2 / '
+                     '(2 r), the bends\' centripetal acceleration and the joint speeds at '
+                     'the floor all fit, so it is their combination with the torque limits '
+                     'and the duration)')
 
 
-def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float) -> None:
+def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float,
+                    velocity_limit: np.ndarray | None = None) -> None:
     """Refuse (code 3, one line) process constraints this path and duration cannot meet
-    before any solve: a duration below length / tcp_speed_max, or above what the speed floor
-    allows; a floor at which the centripetal acceleration in a bend away from the rest ends
-    exceeds tcp_accel_max; rest ramps shorter than the grid's first interval."""
+    before any solve, each with its certificate (the bound that is broken and by how much):
+    a duration below length / tcp_speed_max, or above what the speed floor allows; rest
+    ramps too short to reach tcp_speed_min at tcp_accel_max (v_min^2 / (2 r) > a_max); a
+    floor at which the centripetal acceleration in a bend away from the rest ends exceeds
+    tcp_accel_max; a floor that needs a joint faster than its speed limit
+    (``velocity_limit`` (n,) [rad/s], the limits checked); rest ramps shorter than the grid's
+    first interval."""
     L = path.length
     T = req.duration
     rest = req.boundary == BOUNDARY_REST
@@ -710,15 +739,33 @@ def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: floa
     if rest and r <= sig[1] * (1 + 1e-12):
         no(f'tcp_ramp_length {r * 1e3:.2f} mm is within the first grid interval '
            f'({sig[1] * 1e3:.2f} mm at {sig.size} nodes): no room to reach tcp_speed_min')
+    zone = (sig >= r) & (sig <= L - r) if rest else np.ones(sig.size, bool)
+    s1 = np.sum(tcp.d1_nodes ** 2, axis=1)
     if amax > 0:
-        zone = (sig >= r) & (sig <= L - r) if rest else np.ones(sig.size, bool)
-        s1 = np.sum(tcp.d1_nodes ** 2, axis=1)
         kappa = np.linalg.norm(tcp.d2_nodes, axis=1) / s1          # curvature [1/m]
         k = int(np.argmax(np.where(zone, kappa, 0.0)))
         if zone[k] and vmin ** 2 * kappa[k] > amax:
             no(f'at tcp_speed_min {vmin:g} m/s the centripetal acceleration in the bend of '
                f'radius {1e3 / kappa[k]:.1f} mm ({sig[k] * 1e3:.0f} mm along the path) is '
-               f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2')
+               f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2 (by '
+               f'{100 * (vmin ** 2 * kappa[k] / amax - 1):.1f} %)')
+    if rest and amax > 0 and vmin ** 2 / (2 * r) > amax:
+        need = vmin ** 2 / (2 * r)
+        no(f'reaching tcp_speed_min {vmin:g} m/s within the {r * 1e3:.1f} mm rest ramps '
+           f'needs a TCP acceleration of at least v^2 / (2 r) = {need:.4g} m/s^2 > '
+           f'tcp_accel_max {amax:g} m/s^2 (by {100 * (need / amax - 1):.1f} %); ramps of '
+           f'at least {vmin ** 2 / (2 * amax) * 1e3:.1f} mm fit')
+    if velocity_limit is not None:        # joint speeds the floor needs: v |dq/dsigma|
+        frac = (np.clip(np.minimum(sig, L - sig) / r, 0.0, 1.0) if rest
+                else np.ones(sig.size))
+        need = (vmin * np.sqrt(frac) / np.sqrt(s1))[:, None] * np.abs(entry.nodes.dq)
+        ratio = need / np.asarray(velocity_limit, float)[None, :]
+        k, i = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        if ratio[k, i] > 1.0:
+            no(f'at tcp_speed_min {vmin:g} m/s joint {i + 1} must turn at '
+               f'{need[k, i]:.3f} rad/s {sig[k] * 1e3:.0f} mm along the path, above its '
+               f'speed limit {velocity_limit[i]:.3f} rad/s (by '
+               f'{100 * (ratio[k, i] - 1):.1f} %)')
 
 
 def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) -> dict:
@@ -752,36 +799,45 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
     return fix
 
 
-def rates_consistent(t, q, qd, qdd, rtol: float = 0.025, atol: float = 1e-4) -> bool:
-    """True if between every two message points the mean rate of q and of qd lies between
-    the rates declared at the two points, within half the tolerances of pdplus's plan gate
-    (irb_control plan_checks: mean-value rule, rtol 0.05, atol 2e-4): a consumer that checks
-    the message that way accepts it. Where it does not hold (an acceleration that dips
-    inside a long interval through a tight blend), the planner adds points."""
-    d = np.diff(t)[:, None]
-    for x, v in ((q, qd), (qd, qdd)):
-        rate = np.diff(x, axis=0) / d
-        lo, hi = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
-        excess = np.maximum(lo - rate, rate - hi).clip(min=0.0) * d
-        if np.any(excess > atol + rtol * np.maximum(np.abs(v[:-1]), np.abs(v[1:])) * d):
-            return False
-    return True
+def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
+                   min_spacing: float, sample) -> tuple:
+    """The trajectory message's points from candidate path parameters ``theta`` (increasing,
+    0 .. 2 pi): (t [s] as the message stamps them, theta, theta_dot, theta_ddot, the
+    JointPath ``sample(theta)`` at them).
 
-
-def split_at_breaks(theta: np.ndarray, breaks: np.ndarray, frac: float = 1e-3) -> np.ndarray:
-    """Message points ``theta`` with every interior point that sits on a piece end (where
-    Phi'' jumps) replaced by two, ``frac`` of the shorter neighbouring interval before and
-    after it: each interval between points then lies in one piece, so the accelerations
-    declared at its two ends are its own (a controller's or plan gate's consistency rule
-    between velocities and accelerations holds), and the jump happens between the twins."""
+    * every interior candidate on a piece end (where Phi'' jumps: a blend's end) is replaced
+      by two points half ``min_spacing`` (+0.1 %) of time before and after it: each interval
+      but the one between them lies in one piece, so the accelerations declared at its ends
+      are its own, and the jump is played as the quintic between the twins spreads it;
+    * no two points closer than ``min_spacing`` [s] (``trajectory_rules.spaced``, points
+      where a joint acceleration peaks or dips kept first, then nodes): a controller's
+      quintic between points microseconds apart turns the stamps' nanosecond resolution
+      into acceleration (issue 28);
+    * times rounded to 1 ns, as ``time_from_start`` carries them: the independent check
+      plays exactly what a controller receives (the points keep their exact theta; the
+      <= 0.5 ns this moves a stamp is in the check)."""
     breaks = np.asarray(breaks, float)
     on = np.isin(theta, breaks)
     on[[0, -1]] = False
-    if not np.any(on):
-        return theta
-    k = np.flatnonzero(on)
-    eps = frac * np.minimum(theta[k] - theta[k - 1], theta[k + 1] - theta[k])
-    return np.sort(np.concatenate([theta[~on], theta[k] - eps, theta[k] + eps]))
+    if np.any(on):
+        t_b = profile.theta_at(theta[on])[0]
+        half = 0.5 * min_spacing * (1 + 1e-3)
+        twins = np.concatenate([profile.sample(t_b - half)[0], profile.sample(t_b + half)[0]])
+        theta = np.unique(np.concatenate([theta[~on], twins]))
+    t, td, tdd = profile.theta_at(theta)
+    jp = sample(theta)
+    qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
+    # keep first where a joint's acceleration peaks or dips (an interval across such a point
+    # breaks the mean-value rule of the consistency check: a time-optimal profile's switches,
+    # nodes closer than min_spacing on a fine grid), then the profile's nodes, then the rest
+    ext = np.zeros(theta.size, bool)
+    d = np.diff(qdd, axis=0)
+    ext[1:-1] = np.any(d[:-1] * d[1:] <= 0, axis=1)
+    node = np.isin(theta, profile.theta)
+    keep = spaced(t, min_spacing, node.astype(float) + 2.0 * ext)
+    theta = theta[keep]
+    jp = JointPath(theta, jp.q[keep], jp.dq[keep], jp.ddq[keep])
+    return stamps_ns(t[keep]), theta, td[keep], tdd[keep], jp
 
 
 def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:

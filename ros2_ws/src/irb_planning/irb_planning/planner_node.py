@@ -23,6 +23,7 @@ import time
 import traceback
 
 import numpy as np
+from irb_description.node_help import NodeSpec, Param, Topic
 from irb_description.node_main import run_node, spin_until_signal
 from irb_description.plan_path import path_frame_id
 from irb_interfaces.msg import PathSpec
@@ -59,6 +60,11 @@ PARAMETERS = {
     'trapezoid_ramp_fraction': ('trapezoid_ramp_fraction',
                                 'trapezoid baseline: each ramp as a fraction of T [-]'),
     'evaluation_rate_hz': ('evaluation_rate_hz', 'resampling rate of the check [Hz]'),
+    'play_rate_hz': ('play_rate_hz', 'the independent check plays the trajectory message by '
+                     'quintic interpolation at this rate (>= 8 samples per interval); the '
+                     'reported peaks are the played ones [Hz]'),
+    'min_point_spacing_s': ('min_point_spacing_s', 'smallest interval between two points of '
+                            'the trajectory message (closer points are dropped) [s]'),
     'cache_size': ('cache_size', 'built problems kept (least recently used dropped) [-]'),
     'memory_limit_mib': ('memory_limit_mib', 'built problems are dropped (least recently used '
                          'first) while the resident memory exceeds this [MiB]'),
@@ -101,6 +107,39 @@ PLACE_PARAMETERS = {
     'place_map_dir': ('', "directory the map PNG of each search is written to; '' = none "
                       '[-]'),
 }
+
+
+def _param(name: str, default, text: str) -> Param:
+    """A Param from a description whose trailing '[unit]' is the unit ('[-]': none)."""
+    body, _, unit = text.rstrip().rpartition(' [')
+    if not body or not unit.endswith(']'):
+        return Param(name, default, '', text)
+    unit = unit[:-1]
+    return Param(name, default, '' if unit == '-' else unit, body)
+
+
+SPEC = NodeSpec(
+    'planner', 'irb_planning',
+    'Energy-optimal motion along a path (CasADi/IPOPT on a theta grid) as a service: every '
+    'answer is a plan checked as a controller plays it, or a refusal with its reason; also '
+    'the placement search of a task (place_task).',
+    params=tuple(_param(n, getattr(PlannerSettings(), f), t) for n, (f, t) in
+                 PARAMETERS.items())
+    + (Param(MAP_DIRS, [''], '', "directories friction-map files may be read from; [''] = "
+             'the share of irb_description and runs/, bags/ of $IRB_ROOT (or the working '
+             'directory)'),)
+    + tuple(_param(n, d, t) for n, (d, t) in PLACE_PARAMETERS.items()),
+    publishes=(Topic('planned_trajectory', 'trajectory_msgs/JointTrajectory',
+                     'the latest plan (latched)'),
+               Topic('planned_theta_profile', 'std_msgs/Float64MultiArray',
+                     'its theta profile (latched)'),
+               Topic('planned_path', 'irb_interfaces/PathSpec', 'its path (latched)')),
+    services=(Topic('plan_path', 'irb_interfaces/PlanPath', 'plan a motion along a path'),
+              Topic('place_task', 'irb_interfaces/PlaceTask',
+                    'search where to place a task (minutes)')),
+    example='ros2 run irb_planning planner --ros-args --params-file '
+            '$(ros2 pkg prefix irb_planning)/share/irb_planning/config/planner.yaml\n'
+            'ros2 run irb_planning plan --duration 10 --grid 60')
 
 
 class _Stopped(Exception):
@@ -161,7 +200,10 @@ class PlannerNode(Node):
             raise ValueError('place_default_starts must be in [1, place_max_starts]')
         self.place_planner = Planner(self.planner.model.copy(), dataclasses.replace(
             settings, cache_size=int(self.place['place_cache_size']),
-            min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
+            min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
+            # the search's dozens of map plans are played at the evaluator's rate (>= 8
+            # samples per interval): at 10 kHz a 10 s plan cost 2.8 s CPU instead of 1.1
+            play_rate_hz=settings.evaluation_rate_hz))
         self._place_lock = threading.Lock()
         self._place_state = ''            # what the running search is doing (for ERROR_BUSY)
         self._stopping = threading.Event()
@@ -349,7 +391,7 @@ def _spin(node: PlannerNode) -> None:
 
 
 def main(args=None):
-    run_node(PlannerNode, _spin, args)
+    run_node(PlannerNode, _spin, args, spec=SPEC)
 
 
 if __name__ == '__main__':

@@ -357,11 +357,13 @@ class Transcription:
         lo_dip = np.full(K, lo)
         if self.boundary == BOUNDARY_REST:
             lo_dip[0] = lo_dip[-1] = -np.inf      # the rest intervals have their own rows
-        on = floor_k > 0                          # the speed floor's intervals (rest: never
-        lo_sub = np.where(on, np.maximum(lo_sub, floor_k), lo_sub)   # the first or last)
-        lo_dip = np.where(on, np.maximum(lo_dip, floor_k), lo_dip)
-        lbg = [[lt], np.zeros(K), np.tile(lo_sub, n_quarter), floor_k, -tau_n, -tau_m,
-               -tau_rev, np.tile(lo_dip, n_sub + 2)]
+        # the speed floor at each row's own point (rest: never the first or last interval)
+        floor_q, floor_dip = self._floor_points(req, floor_n)
+        lo_q = np.maximum(lo_sub[None, :], floor_q)                 # (n_sub, K)
+        lo_dip = np.where(floor_dip > 0, np.maximum(lo_dip[None, :], floor_dip),
+                          lo_dip[None, :])                          # (n_sub + 2, K)
+        lbg = [[lt], np.zeros(K), lo_q[:n_quarter].ravel(), floor_k, -tau_n, -tau_m,
+               -tau_rev, lo_dip.ravel()]
         ubg = [[ut], np.zeros(K), np.tile(cap_m, n_quarter), beta_m, tau_n, tau_m, tau_rev,
                np.full((n_sub + 2) * K, np.inf)]
         if self._ne:
@@ -405,10 +407,10 @@ class Transcription:
             v2 = req.tcp_speed_min ** 2
             if self.boundary == BOUNDARY_REST:
                 r = req.tcp_ramp_length
-                frac = np.clip(np.minimum(sig, sig[-1] - sig) / r, 0.0, 1.0)
+                frac = self._ramp_fraction(sig, r)
                 frac[0] = frac[-1] = 0.0              # b = 0 at the rest nodes
                 floor_n = v2 * frac / s1n
-                fk = np.maximum(frac[:-1], frac[1:])
+                fk = self._ramp_fraction(0.5 * (sig[:-1] + sig[1:]), r)  # at the midpoints
                 fk[0] = fk[-1] = 0.0                  # the rest intervals: a_rest
                 floor_k = v2 * fk / s1m
                 a_rest = v2 / (2 * r * np.sqrt(s1n[[0, -1]]))
@@ -416,6 +418,41 @@ class Transcription:
                 floor_k = v2 / s1m
                 floor_n = v2 / s1n
         return cap_n, cap_m, floor_n, floor_k, a_rest
+
+    @staticmethod
+    def _ramp_fraction(sigma: np.ndarray, ramp: float) -> np.ndarray:
+        """The floor's fraction of v_min^2 at arc lengths ``sigma`` [m] of a rest-to-rest
+        path: d / ramp, d the distance to the nearer rest end, at most 1."""
+        length = float(sigma[-1]) if sigma.ndim == 1 else float(np.max(sigma))
+        return np.clip(np.minimum(sigma, length - sigma) / ramp, 0.0, 1.0)
+
+    def _floor_points(self, req: SolveRequest, floor_n: np.ndarray):
+        """The speed floor on b at the rows' own points: (n_sub, K) at the quarter points
+        j / TIME_SUBSTEPS of every interval, and (n_sub + 2, K) for the dip rows of the
+        points j = 0 .. TIME_SUBSTEPS (each the floor's smallest value over the pieces next
+        to its point: the dip row bounds b between the points). Over the ramps the floor
+        rises with the distance from the rest end, so each row gets the value where it
+        is: a bound per interval (the larger of its nodes', issue 28) shifted the ramp by a
+        grid interval and refused the constant-acceleration start the ramp is meant for.
+        Zero where there is no floor (the rest intervals, no tcp_speed_min)."""
+        N, K, J = self.N, self.N - 1, TIME_SUBSTEPS
+        if req.tcp_speed_min <= 0:
+            return np.zeros((J - 1, K)), np.zeros((J + 1, K))
+        sig = self.tcp.sigma
+        frac_j = np.arange(J + 1)[:, None] / J
+        sig_p = sig[None, :-1] + np.diff(sig)[None, :] * frac_j        # (J + 1, K)
+        s1 = np.sum(self.tcp.d1_mids ** 2, axis=1)[None, :]           # |p'|^2, constant
+        v2 = req.tcp_speed_min ** 2
+        if self.boundary == BOUNDARY_REST:
+            full = np.concatenate([sig_p.ravel(), sig[-1:]])
+            frac = self._ramp_fraction(full, req.tcp_ramp_length)[:-1].reshape(sig_p.shape)
+            frac[:, 0] = frac[:, -1] = 0.0
+        else:
+            frac = np.ones_like(sig_p)
+        fp = v2 * frac / s1
+        lo_nb = np.minimum(fp, np.vstack([fp[:1], fp[:-1]]))
+        lo_nb = np.minimum(lo_nb, np.vstack([fp[1:], fp[-1:]]))
+        return fp[1:-1], lo_nb
 
     def initial_guess(self, req: SolveRequest, lbx, ubx) -> np.ndarray:
         """b constant at the requested mean speed (clipped to the bounds), a from b, e = |y|."""
