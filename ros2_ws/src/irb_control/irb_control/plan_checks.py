@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
+                                              worst_inconsistency)
 
 
 class PlanRejected(ValueError):
@@ -39,8 +41,8 @@ class PlanLimits:
     max_acceleration: float = 50.0       # [rad/s^2], any joint
     torque_fraction: float = 0.9         # of the torque limit the feed-forward may use
     max_points: int = 20000
-    consistency_rtol: float = 0.05       # residual / what the rates allow
-    consistency_atol_rad: float = 2e-4   # [rad] (and [rad/s] for velocities)
+    consistency_rtol: float = CONSISTENCY_RTOL      # residual / what the rates allow
+    consistency_atol_rad: float = CONSISTENCY_ATOL  # [rad] (and [rad/s] for velocities)
 
 
 def check_size(n_points: int, limits: PlanLimits) -> None:
@@ -88,25 +90,13 @@ def check_joint_plan(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarr
         if abs(qdd[k, i]) > limits.max_acceleration:
             fail('acceleration limit', k, i, f'|qdd| = {abs(qdd[k, i]):.3g} > '
                  f'{limits.max_acceleration:g} rad/s^2')
-    # consistency: between neighbours the mean rate (x_{k+1} - x_k) / dt must lie between the
-    # declared rates at the two points (mean-value theorem for a rate monotone within one
-    # interval), widened by the tolerances. It holds for smooth plans and for accelerations
-    # that switch at or between points (ramp ends of a trapezoid or a sweep); it refuses a
-    # step or a chatter that the declared rates do not explain.
-    d = dt[:, None]
-    for what, x, v in ((('positions vs velocities', q, qd),
-                        ('velocities vs accelerations', qd, qdd)) if consistency else ()):
-        rate = np.diff(x, axis=0) / d
-        lo, hi = np.minimum(v[:-1], v[1:]), np.maximum(v[:-1], v[1:])
-        excess = np.maximum(lo - rate, rate - hi).clip(min=0.0) * d
-        allowed = (limits.consistency_atol_rad
-                   + limits.consistency_rtol * np.maximum(np.abs(v[:-1]), np.abs(v[1:])) * d)
-        over = excess > allowed
-        if np.any(over):
-            k, i = np.unravel_index(int(np.argmax(excess - allowed)), excess.shape)
-            fail(f'inconsistent {what}', k, i, f'change {np.diff(x, axis=0)[k, i]:+.4g} '
-                 f'over {dt[k] * 1e3:.2f} ms while the declared rates allow '
-                 f'{lo[k, i] * dt[k]:+.4g} to {hi[k, i] * dt[k]:+.4g}')
+    # consistency: one rule for the planner and this gate (irb_description.trajectory_rules:
+    # between neighbours the mean rate must lie between the declared rates at the two
+    # points, widened by the tolerances)
+    bad = (worst_inconsistency(t, q, qd, qdd, limits.consistency_rtol,
+                               limits.consistency_atol_rad) if consistency else None)
+    if bad is not None:
+        fail(f'inconsistent {bad.what}', bad.point, bad.joint, bad.detail())
     summary = {'points': int(t.size), 'duration_s': float(t[-1] - t[0]),
                'peak_speed': np.abs(qd).max(axis=0).tolist(),
                'peak_acceleration': np.abs(qdd).max(axis=0).tolist()}
