@@ -50,8 +50,9 @@ def test_walkthrough_runs_literally(tmp_path):
     script = tmp_path / 'walkthrough.sh'
     # the README's lines unchanged; bash -e stops at the first failing command, and the
     # trap ends whatever the block left running if it failed half-way
-    script.write_text('set -eo pipefail\n'
-                      'trap \'kill -INT $(jobs -p) 2>/dev/null; wait\' EXIT\n' + block)
+    script.write_text('set -xeo pipefail\n'
+                      'trap \'kill $(jobs -p) 2>/dev/null || true; wait || true\' EXIT\n'
+                      + block)
     env = dict(os.environ, IRB_ROOT=str(tmp_path), MPLBACKEND='Agg',
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_DOMAIN_ID=str(100 + os.getpid() % 100))
