@@ -78,7 +78,9 @@ def test_partial_identification_and_bad_bags(experiment_bags, model, tmp_path, c
     assert identify.main(args) == 2
     err = capsys.readouterr()
     assert 'corrupt' in err.err and 'does not exist' in err.err
-    assert 'joint_3: 2 usable speed(s), need at least 4' in err.out
+    # joint 3 swept at 0.02 and 0.035 rad/s only: below 2 % of the fastest joint's top speed
+    # it is reported as not moved on its own (issue 27's relative v_min), not fitted
+    assert 'joint_3: not moved on its own' in err.out, err.out
     fmap = load_friction_map(out)
     assert list(fmap.joint_names) == ['joint_1', 'joint_2']
     assert identify.main(args[:-1] + ['--fill-nominal']) == 2
