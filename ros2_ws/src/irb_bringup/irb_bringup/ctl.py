@@ -186,9 +186,18 @@ def status(a, ros_args) -> int:
             rates start only then: matching takes seconds on a loaded host)."""
             return all(sub.get_publisher_count() >= s.node.count_publishers(sub.topic_name)
                        for sub in subs)
+        latched = {'plan': core.join_name(pdplus, 'plan_status'),
+                   'axis': core.join_name(ns, 'axis_status')}
+
+        def latched_in():
+            """Every latched topic that has a publisher has delivered its last message
+            (matching alone does not mean the transient-local sample has arrived yet)."""
+            return all(key in last or s.node.count_publishers(topic) == 0
+                       for key, topic in latched.items())
         seen, services, drives = _discover(
             s, a.pdplus, a.timeout,
-            lambda found, settled: _ready('status')(found, settled) and matched())
+            lambda found, settled: (_ready('status')(found, settled) and matched()
+                                    and latched_in()))
         for times in arrivals.values():
             times.clear()
         s.spin_for(a.window)
