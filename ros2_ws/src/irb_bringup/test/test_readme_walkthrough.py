@@ -84,7 +84,7 @@ def test_walkthrough_runs_literally(tmp_path):
     from mcap_ros2.decoder import DecoderFactory
     files = sorted((tmp_path / 'bags' / 'my_run').glob('*.mcap'))
     assert files, 'no MCAP file in bags/my_run'
-    stamps, modes = [], set()
+    stamps, modes, mode_seq = [], set(), []
     for f in files:
         with open(f, 'rb') as fh:
             reader = make_reader(fh, decoder_factories=[DecoderFactory()])
@@ -96,10 +96,15 @@ def test_walkthrough_runs_literally(tmp_path):
                     stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
                 else:
                     modes.add(msg.mode)
+                    mode_seq.append(msg.mode)
     assert len(stamps) > 500, len(stamps)           # > 2 s at 248 Hz: the run is in it
     steps = [b - a for a, b in zip(stamps, stamps[1:])]
     assert max(steps) < 0.05, f'a hole of {max(steps):.3f} s in /joint_states'
     assert {1, 2} <= modes, f'the bag saw no ramp and path: modes {modes}'
+    # nothing moved before the enable: the graph came up idle, and the recording (started
+    # before the plan) opens on idle
+    assert re.search(r'pdplus \S+: mode idle', text), text[-3000:]
+    assert mode_seq[0] == 0, f'the recording opens in mode {mode_seq[0]}, not idle'
 
     # report: Markdown with the run's figures, PNGs beside it
     report = (tmp_path / 'my_report' / 'report.md').read_text()
