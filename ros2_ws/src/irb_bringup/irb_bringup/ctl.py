@@ -9,8 +9,9 @@
     ros2 run irb_bringup ctl hold       # pdplus ~/hold, where pdplus offers it
     ros2 run irb_bringup ctl enable --wait   # enable, then wait until the motion it started
                                         # has ended (hold or idle); exit 1 if pdplus stops
-    ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (a resting mode, idle
-                                        # or hold, after a motion); exit 1 if it stops
+    ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (hold: after a
+                                        # motion; idle: as soon as pdplus is up and idle);
+                                        # exit 1 if it stops
 
 Exit codes: 0 done; 1 refused by the node (its message is printed); 2 node or service not
 there, or no answer within --timeout. Every wait is bounded. The text and the rates come from
@@ -41,8 +42,8 @@ def parse_args(argv):
                    '~/reset (and pdplus\'s, where it has one); wait MODE: until pdplus '
                    'reports MODE (idle, ramp, path, time, hold, stopped)')
     p.add_argument('mode', nargs='?', default='',
-                   help='wait: the mode to wait for (a resting mode, idle or hold, is waited '
-                   'for after a motion: ctl enable; ctl wait hold)')
+                   help='wait: the mode to wait for (hold is waited for after a motion: '
+                   'ctl enable; ctl wait hold; idle, where pdplus starts, at once)')
     p.add_argument('--pdplus', default='/pdplus', help='the controller node; its namespace is '
                    'that of the topics and of the drive (default: /pdplus)')
     p.add_argument('--timeout', type=float, default=10.0,
@@ -268,11 +269,11 @@ def trigger(a, ros_args) -> int:
 class _ModeFollower:
     """The ``wait_outcome`` of pdplus's /controller_state, message by message."""
 
-    def __init__(self, session, pdplus: str, target: str):
+    def __init__(self, session, pdplus: str, target: str, after_motion: bool | None = None):
         from irb_bringup import ctl_core as core
         from irb_interfaces.msg import ControllerState
         from rclpy.qos import qos_profile_sensor_data
-        self.core, self.target = core, target
+        self.core, self.target, self.after_motion = core, target, after_motion
         self.moving, self.code, self.mode, self.reason = False, None, None, ''
         ns, _ = core.split_node(pdplus)
         self.sub = session.node.create_subscription(
@@ -288,7 +289,7 @@ class _ModeFollower:
             self.moving = True
         self.mode, self.reason = name, msg.stop_reason
         self.code = self.core.wait_outcome(self.target, msg.mode, msg.stop_reason,
-                                           self.moving)
+                                           self.moving, self.after_motion)
 
     def verdict(self, timeout: float) -> int:
         core = self.core
@@ -311,8 +312,8 @@ def _enable_and_wait(s, a) -> int:
     from irb_bringup import ctl_core as core
     from std_srvs.srv import Trigger
     pdplus = core.join_name(*core.split_node(a.pdplus))
-    follow = {'hold': _ModeFollower(s, a.pdplus, 'hold'),
-              'idle': _ModeFollower(s, a.pdplus, 'idle')}
+    follow = {'hold': _ModeFollower(s, a.pdplus, 'hold', after_motion=True),
+              'idle': _ModeFollower(s, a.pdplus, 'idle', after_motion=True)}
     client = s.node.create_client(Trigger, core.join_name(pdplus, 'enable'))
     if not client.wait_for_service(timeout_sec=a.timeout):
         print(f'service {pdplus}/enable not available', file=sys.stderr)

@@ -153,18 +153,24 @@ def missing_service_text(command: str, pdplus: str, offered: list[str]) -> str:
             f"{', '.join(sorted(offered)) or 'none'})")
 
 
-def wait_outcome(target: str, mode: int, stop_reason: str, seen_moving: bool) -> int | None:
-    """``ctl wait``'s verdict on one ControllerState: OK once pdplus is in mode ``target``
-    (after having moved, when ``target`` is a resting mode: a wait for 'hold' started before
-    the motion began must not end on the hold it started from), REFUSED when it is stopped
-    (the latched stop ends the wait: it will not leave it by itself), None to keep waiting."""
+def wait_outcome(target: str, mode: int, stop_reason: str, seen_moving: bool,
+                 after_motion: bool | None = None) -> int | None:
+    """``ctl wait``'s verdict on one ControllerState: OK once pdplus is in mode ``target``,
+    REFUSED when it is stopped (the latched stop ends the wait: it will not leave it by
+    itself), None to keep waiting. ``after_motion`` (default: for 'hold', the mode a motion
+    ends in) asks for the mode only after pdplus has moved: a wait for 'hold' started before
+    the motion began must not end on the hold it started from. 'idle' is what pdplus starts
+    in (nothing moves until enabled), so ``ctl wait idle`` ends as soon as pdplus is up and
+    idle; ``ctl enable --wait`` asks for either resting mode after the motion."""
+    if after_motion is None:
+        after_motion = target == 'hold'
     if mode == MODE_STOPPED and target != 'stopped':
         return REFUSED
-    if MODE_NAMES.get(mode) == target and (seen_moving or target not in RESTING):
+    if MODE_NAMES.get(mode) == target and (seen_moving or not after_motion):
         return OK
     return None
 
 
-#: modes pdplus rests in after a motion; ``ctl wait`` for one waits for a motion to end there
+#: modes pdplus rests in; ``ctl enable --wait`` waits for one of them after the motion
 RESTING = ('idle', 'hold')
 

@@ -65,8 +65,12 @@ class Lines:
         return self.count(prefix, needle) > 0
 
 
+_T0 = time.monotonic()
+
+
 def log(text):
-    print(f'[thesis_run] {text}', flush=True)
+    """One progress line, with the wall time since the job started."""
+    print(f'[thesis_run {time.monotonic() - _T0:6.1f} s] {text}', flush=True)
 
 
 def repo_root() -> Path:
@@ -272,34 +276,26 @@ def main(args=None) -> int:
         link = Link()
         executed = {}
         plans = {}
-        retries = []
 
         def execute(g, label, objective, friction, path=None, duration=None, process=None,
                     center=None, energy_model=''):
-            # a run whose bag misses samples (the recorder stalled on the shared machine) is
-            # run once more, said in the log; a second such bag fails the job
-            for attempt in (1, 2):
-                name = f'{run_id}_{label}' + ('' if attempt == 1 else f'_{attempt}')
-                run_once(g, label, name, objective, friction, path, duration, process, center,
-                         energy_model)
-                try:
-                    run_complete(bags / name)
-                except ValueError as exc:
-                    if attempt == 2:
-                        raise RuntimeError(f'{label}: {exc}') from None
-                    log(f'   {label}: {exc}; running it again')
-                    retries.append(f'{label} run again: {exc}')
-                    continue
-                break
+            # one recorder per run, all topics; a bag that misses samples (the recorder's own
+            # loss ledger, or a gap in the path phase) fails the job: data is never lost
+            # quietly, and no run is repeated to hide it
+            name = f'{run_id}_{label}'
+            run_once(g, label, name, objective, friction, path, duration, process, center,
+                     energy_model)
+            try:
+                run_complete(bags / name)
+            except ValueError as exc:
+                raise RuntimeError(f'{label}: {exc}') from None
             executed[label] = str(bags / name)
             log(f'   {label}: done, bag {bags / name}')
 
         def run_once(g, label, name, objective, friction, path, duration, process, center,
                      energy_model):
             link.modes.clear()
-            rec = 'rec_' + name[len(run_id) + 1:]       # one process name per attempt
-            recorders = {rec: (name, RECORDED_TOPICS),
-                         'drv_' + rec[4:]: (name + POWER_SUFFIX, POWER_TOPICS)}
+            recorders = {'rec_' + label: (name, RECORDED_TOPICS)}
             for proc, (bag, topics) in recorders.items():
                 g.add(ProcessSpec(proc, ros2_run_cmd(
                     'irb_identification', 'recorder', params={
@@ -402,7 +398,7 @@ def main(args=None) -> int:
         # 7 ---------------------------------------------------------------------------------
         log(f'7/{PHASES} report')
         write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags,
-                     time.monotonic() - t_start, rect_file, placement, plant_el, retries)
+                     time.monotonic() - t_start, rect_file, placement, plant_el)
         log(f'done in {time.monotonic() - t_start:.0f} s: {out / "report.md"}')
         return 0
     except KeyboardInterrupt:
@@ -421,30 +417,34 @@ def main(args=None) -> int:
             link.close()
 
 
-#: what each run's recorder records into the run's bag: what the report measures
-RECORDED_TOPICS = ('/joint_states', '/controller_state', '/camera/tcp')
-#: what a second recorder per run records into <bag><POWER_SUFFIX>: the drive side, the
-#: commanded torques and the simulator's electrical_power (issue 17). One recorder with all
-#: five topics fell behind the lockstep simulator (about 2x real time: 2200 messages/s
-#: against the recorder's 1500-1900) and lost 0.1-1.3 s of samples in 5 of 8 runs on the
-#: shared 2-core VM (the four default topics in one recorder: 2 of 7 runs of a quick job)
-POWER_TOPICS = ('/torque_command', '/electrical_power')
-POWER_SUFFIX = '_drive'
+#: what each run's recorder records into the run's bag: what the report measures, the drive
+#: side (commanded torques) and the simulator's electrical_power (issue 17). Until issue 31
+#: a second recorder took the last two, and a run with holes was run again; the recorder now
+#: takes every waiting message on each wake and writes on its own thread (0 lost of 7 topics
+#: in real time; irb_identification/benchmarks/RESULTS.md), so one recorder holds them all
+RECORDED_TOPICS = ('/joint_states', '/controller_state', '/camera/tcp', '/torque_command',
+                   '/electrical_power')
 #: a run starts once its recorders subscribed to these (/torque_command is not awaited: it
 #: may appear only once pdplus is enabled)
 AWAITED_TOPICS = ('/joint_states', '/controller_state', '/camera/tcp', '/electrical_power')
 
 
 def run_complete(bag: Path) -> None:
-    """ValueError if a run's bags miss samples of its path phase (controller and joint
-    states; electrical power in <bag><POWER_SUFFIX>)."""
+    """ValueError if a run's bag lost messages (the recorder's own ledger, losses.yaml) or
+    misses samples of its path phase (joint states, electrical power)."""
+    import yaml
     from irb_identification.series import read_joint_series
 
     from .energy_report import electrical_figures
     from .run_report import check_gap, path_window
+    losses = Path(bag) / 'losses.yaml'
+    if losses.is_file():
+        lost = yaml.safe_load(losses.read_text()) or {}
+        raise ValueError(f'bag {bag}: the recorder lost {lost.get("lost_total", "some")} '
+                         f'messages (see {losses})')
     t0, t1 = path_window(bag)
     check_gap(read_joint_series(bag).t, t0, t1, '/joint_states', bag)
-    electrical_figures(f'{bag}{POWER_SUFFIX}', 'check', 0.0, (t0, t1))
+    electrical_figures(bag, 'check', 0.0, (t0, t1))
 
 
 def plant_bus_mode(plant_electrical_yaml: Path) -> str:
@@ -491,7 +491,7 @@ def write_rectangle(rect: dict, out: Path) -> Path:
 
 
 def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags, elapsed,
-                 rect_file=None, placement=None, plant_el=None, retries=()):
+                 rect_file=None, placement=None, plant_el=None):
     """Figures from the bags, plots, report.md and summary.json; ``placement``: phase 6's
     block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML."""
     from irb_description.friction import load_friction_map
@@ -536,7 +536,6 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
              'int |g(Phi)^T Phi\'| dtheta, depends on the path only, not on the timing; it '
              'dominates this circle (joint 2), which bounds what any speed profile can save '
              'in this model']
-    notes += list(retries)
     ident_json = json.loads((out / 'identify.json').read_text())
     st = ident_json.get('stream', {})
     notes.append(f'identification ran as replay -> identifier node: {st.get("received")} of '
@@ -646,7 +645,7 @@ def energy_sections(out, cfg, executed, figs, plans, placement, plant_el):
 
     rel = partial(link_path, base=out)
     labels = [k for k in ('energy_ff', 'trapezoid_ff', 'best_energy_ff') if k in executed]
-    elec = {k: electrical_figures(executed[k] + POWER_SUFFIX, k, standby,
+    elec = {k: electrical_figures(executed[k], k, standby,
                                   path_window(executed[k])) for k in labels}
     plot = plot_electrical(list(elec.values()), mode, out / 'plots' / 'electrical_power.png')
 

@@ -37,7 +37,11 @@ def test_wait_outcome_follows_a_motion_to_its_end():
     assert core.wait_outcome('stopped', MODE_STOPPED, 'watchdog', False) == core.OK
     # a moving mode is reached without a motion before it
     assert core.wait_outcome('path', MODE_PATH, '', False) == core.OK
-    assert core.wait_outcome('idle', MODE_IDLE, '', False) is None
+    # idle is where pdplus starts: ctl wait idle ends once it is up; enable --wait asks for
+    # a resting mode after the motion only
+    assert core.wait_outcome('idle', MODE_IDLE, '', False) == core.OK
+    assert core.wait_outcome('idle', MODE_IDLE, '', False, after_motion=True) is None
+    assert core.wait_outcome('idle', MODE_IDLE, '', True, after_motion=True) == core.OK
 
 
 def test_wait_arguments_are_checked(capsys):

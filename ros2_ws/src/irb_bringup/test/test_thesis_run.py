@@ -251,7 +251,7 @@ def test_quick_pipeline_end_to_end(tmp_path):
     elec = s['electrical_energy_j']
     for run in ('energy_ff', 'trapezoid_ff', 'best_energy_ff'):
         # the bag's electrical_power integrated here, not by the report's function
-        assert s['electrical_power_bags'][run] == s[run]['bag'] + '_drive'
+        assert s['electrical_power_bags'][run] == s[run]['bag']      # one recorder, one bag
         own = _bag_electrical_energy(s[run]['bag'], s['electrical_power_bags'][run])
         for mode, e in own.items():
             assert elec[run][mode] == pytest.approx(e, rel=1e-9), (run, mode)

@@ -154,7 +154,11 @@ def state_qos() -> QoSProfile:
 # (a lost packet is gone), depth 100 0-2; at load 11 depth 100 once lost a burst of 33 (the
 # recorder fell behind by more than the depth), depth 250 none in 5 runs at load 9-11.
 # Keep-last never blocks the publisher, whatever the depth.
-STATE_PUB_DEPTH = 250
+# Raised to 2500 (10 s at 248 Hz, ~0.4 MB per topic) for issue 31: a recorder in lockstep
+# beside two CPU burners (7 topics, load 25) lost 3.8 % with 250 and 0.43 % with 2500, all of
+# it to samples the publisher had already overwrote while the recorder got no CPU
+# (irb_identification/benchmarks/RESULTS.md).
+STATE_PUB_DEPTH = 2500
 
 
 def state_pub_qos() -> QoSProfile:

@@ -47,7 +47,7 @@ SPEC = NodeSpec(
     example='ros2 run irb_description state_publisher --ros-args -p trace_duration_s:=20.0',
 )
 
-TF_DEPTH = 250          # as the 248 Hz state publishers (node_main.STATE_PUB_DEPTH)
+TF_DEPTH = 2500         # as the 248 Hz state publishers (node_main.STATE_PUB_DEPTH)
 PATH_COLOR = (0.1, 0.6, 1.0, 1.0)
 TRACE_COLOR = (1.0, 0.2, 0.2, 1.0)
 

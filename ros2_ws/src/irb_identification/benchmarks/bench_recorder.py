@@ -6,7 +6,8 @@ lockstep, quiet and beside CPU burners.
 
 A publisher process sends N topics of sensor_msgs/JointState (position[0] = its own count k,
 header stamp = k x 4.032 ms of simulated time) with the simulator's QoS (reliable, keep last
-250): ``realtime`` at 248 Hz of wall time; ``lockstep`` as fast as ``--speed`` x real time
+STATE_PUB_DEPTH: 2500 since issue 31, --pub-depth): ``realtime`` at 248 Hz of wall time;
+``lockstep`` as fast as ``--speed`` x real time
 (2.5: the lockstep simulator beside pdplus on this machine) with /clock, the recorder on
 simulated time. The recorder is the ``recorder`` executable (its own process). Loss is counted
 from outside the recorder: the publisher's count per topic against the bag, read with the
@@ -221,8 +222,8 @@ def main() -> int:
     ap.add_argument('--speed', type=float, default=2.5, help='lockstep: x real time')
     ap.add_argument('--out', default='')
     ap.add_argument('--keep', action='store_true', help='keep the bag (its path in the JSON)')
-    ap.add_argument('--pub-depth', type=int, default=250,
-                    help="publishers' keep-last depth (the simulator's STATE_PUB_DEPTH: 250)")
+    ap.add_argument('--pub-depth', type=int, default=2500,
+                    help="publishers' keep-last depth (the simulator's STATE_PUB_DEPTH: 2500)")
     args = ap.parse_args()
     # a timeout's SIGTERM ends the run through its finally (the burners are killed)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
@@ -233,7 +234,7 @@ def main() -> int:
     print(text)
     res = HERE / 'results'
     res.mkdir(exist_ok=True)
-    tag = '' if args.pub_depth == 250 else f'_depth{args.pub_depth}'
+    tag = '' if args.pub_depth == 250 else f'_depth{args.pub_depth}'   # older files: 250
     (res / f'recorder_{args.topics}t_{args.mode}_{args.burners}b{tag}.json').write_text(
         text + '\n')
     return 0
