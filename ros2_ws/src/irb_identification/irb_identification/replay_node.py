@@ -128,14 +128,17 @@ def _make_node_class():
                     q.history = HistoryPolicy.KEEP_ALL
                 self.pubs[t] = self.create_publisher(message_class(ty), t, q)
             self.counts = {t: 0 for t in self.pubs}
+            self.segments = []
             for b in self.bags:
                 other = bag_topics(b)
                 for t in self.pubs:
                     if t in other and other[t] != types[t]:
                         raise BagError(f'bag {b}: {t} is {other[t]}, in {self.bag} {types[t]}')
-                for t, c in bag_info(b)['topics'].items():
-                    if t in self.counts:
-                        self.counts[t] += int(c['count'])
+                seg = {t: int(c['count']) for t, c in bag_info(b)['topics'].items()
+                       if t in self.counts}
+                for t, c in seg.items():
+                    self.counts[t] += c
+                self.segments.append({'bag': str(b), 'topics': seg})
             self.label = self.bag if len(self.bags) == 1 else (
                 f'{self.bag} and {len(self.bags) - 1} more')
             self.published = {t: 0 for t in self.pubs}
@@ -190,7 +193,9 @@ def _make_node_class():
             if self.status_pub is not None:
                 self.status_pub.publish(self._String(data=replay_status(
                     state, self.label, self.counts, self.published, reason,
-                    stream=self.stream_id)))
+                    stream=self.stream_id,
+                    segments=(getattr(self, 'segments', [])
+                              if len(getattr(self, 'bags', [])) > 1 else []))))
 
         def _publish(self, topic: str, data: bytes) -> None:
             """Publish; with ``reliable`` (keep all) a full queue makes the middleware refuse the

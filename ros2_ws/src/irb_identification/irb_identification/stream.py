@@ -24,13 +24,34 @@ from .series import JointStateError, decode_joint_states
 
 
 def replay_status(state: str, bag: str, topics: dict, published: dict | None = None,
-                  reason: str = '', stream: str = '') -> str:
+                  reason: str = '', stream: str = '', segments: list | None = None) -> str:
     """The JSON text `replay` publishes on its status topic: ``state`` is playing, finished,
     stopped or failed; ``topics``: messages per topic in the bag (what will be played);
     ``published``: messages published so far; ``stream``: the id of this playback (each
-    topic's messages carry the publisher's sequence numbers 1..N)."""
+    topic's messages carry the publisher's sequence numbers 1..N); ``segments``: when
+    several bags are played as one stream, [{'bag': name, 'topics': {topic: count}}] in
+    playing order, so a reader can tell where one bag ends and the next begins (the time
+    between two bags is not a loss)."""
     return json.dumps({'state': state, 'bag': str(bag), 'topics': topics,
-                       'published': published or {}, 'reason': reason, 'stream': stream})
+                       'published': published or {}, 'reason': reason, 'stream': stream,
+                       'segments': segments or []})
+
+
+def split_by_segments(n: int, segments: list, topic: str) -> list[tuple[str, int, int]]:
+    """[(bag name, first, end)] index ranges of ``n`` messages of ``topic`` received in
+    order, from the replay's ``segments``; [] when they do not add up to ``n`` (then the
+    stream is read as one series)."""
+    out, start = [], 0
+    for seg in segments or []:
+        try:
+            count = int((seg.get('topics') or {}).get(topic, 0))
+            name = Path(str(seg.get('bag', 'bag'))).name
+        except (AttributeError, TypeError, ValueError):
+            return []
+        if count > 0:
+            out.append((name, start, start + count))
+        start += count
+    return out if start == n and len(out) > 1 else []
 
 
 @dataclass
@@ -276,10 +297,21 @@ class StreamIdentifier:
                         s.effort[finite])
         stream['nan_samples'] = bad
         label = Path(str((self.status or {}).get('bag') or 'stream')).name
+        # several bags played as one stream: one series per bag (as identify reads them), so
+        # the time between two bags is not taken for lost samples; only a complete stream
+        # (every message, in order) is cut at the counts the replay announced
+        parts = split_by_segments(len(self.data), (self.status or {}).get('segments'),
+                                  cfg.topic) if complete and not bad else []
+        series, labels = [s], [label]
+        if parts:
+            series = [type(s)(s.t[a:b], s.names, s.position[a:b], s.velocity[a:b],
+                              s.effort[a:b]) for _, a, b in parts]
+            labels = [name for name, _, _ in parts]
+            stream['segments'] = len(parts)
         try:
-            results = identify_joints([s], [label], [cfg.torque_kind], cfg.joints or None,
-                                      cfg.name_map, self.model, cfg.pipeline,
-                                      progress=progress)
+            results = identify_joints(series, labels, [cfg.torque_kind] * len(series),
+                                      cfg.joints or None, cfg.name_map, self.model,
+                                      cfg.pipeline, progress=progress)
             for r in results:
                 report['joints'][r.name] = report_entry(r)
             source = f'identified by the identifier node from {label}'

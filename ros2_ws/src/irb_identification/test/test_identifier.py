@@ -293,6 +293,48 @@ def test_stream_accounting_never_gives_a_silent_partial_answer(tmp_path, model):
     assert not out.ok and out.error == ('replay failed: bag bags/nope does not exist; no map')
 
 
+def test_several_bags_in_one_stream_are_read_bag_by_bag(tmp_path, model):
+    """Two bags played as one stream, 30 s apart: with the replay's segments the identifier
+    reads them as two series (as identify reads two bags), so the 30 s between them is no
+    'data with gaps'; without segments (an old replay) it is one series and says so; a
+    real hole inside a bag is still reported with segments."""
+    from irb_identification.stream import split_by_segments
+    n = 3000
+    core, _, t_ns = _stream_core(tmp_path, model, n)
+    t_ns = t_ns.copy()
+    t_ns[n // 2:] += 30 * 10**9                         # the second bag, 30 s later
+    v = 0.5 * np.sin(np.arange(n) * 0.004032 * 2.0)     # as _stream_core, restamped
+    msgs = encode_joint_states(t_ns, ['axis'], (np.cumsum(v) * 0.004032)[:, None],
+                               v[:, None], (np.sign(v) * 2 + 0.8 * v)[:, None])
+    segs = [{'bag': 'bags/a', 'topics': {'/joint_states': n // 2, '/other': 7}},
+            {'bag': 'bags/b', 'topics': {'/joint_states': n - n // 2}}]
+    assert split_by_segments(n, segs, '/joint_states') == [('a', 0, n // 2),
+                                                           ('b', n // 2, n)]
+    assert split_by_segments(n + 1, segs, '/joint_states') == []    # counts must add up
+
+    def run(segments, holes=()):
+        core, _, _ = _stream_core(tmp_path, model, n)
+        keep = [k for k in range(n) if k not in holes]
+        core.on_status(replay_status('playing', 'bags/a', {'/joint_states': len(keep)},
+                                     stream='s', segments=segments))
+        for j, k in enumerate(keep):
+            core.add(msgs[k], int(t_ns[k]), 1.0, seq=j + 1)
+        core.on_status(replay_status('finished', 'bags/a', {'/joint_states': len(keep)},
+                                     {'/joint_states': len(keep)}, stream='s',
+                                     segments=segments))
+        out = core.compute('finished')
+        assert out.ok, out.error
+        return json.dumps(out.report['joints'])
+
+    assert 'data with gaps' not in run(segs)
+    assert 'data with gaps' in run([])
+    inner = range(200, 260)                             # 60 samples lost inside bag a
+    segs_holed = [{'bag': 'bags/a', 'topics': {'/joint_states': n // 2 - len(inner)}},
+                  segs[1]]
+    text = run(segs_holed, holes=inner)
+    assert 'data with gaps' in text and 'bag a' in text and 'bag b' not in text, text
+
+
 @pytest.mark.slow
 def test_processes_replay_as_fast_as_the_identifier_takes(sweep_bag, offline_map, tmp_path,
                                                           domain_id):
