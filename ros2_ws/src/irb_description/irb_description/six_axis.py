@@ -345,10 +345,15 @@ class SixAxisKinematics:
         ``CONFIGURATIONS``) for one TCP pose T (4, 4); with ``check_limits`` only those inside
         the joint limits. Empty list: the pose is unreachable (or outside the limits)."""
         q, reach, inside, wr, sh, el = self._all(T, q_ref, CONFIGURATIONS)
-        return [IKSolution(q[i].copy(), *cfg, bool(inside[i]), bool(wr[i]), bool(sh[i]),
-                           bool(el[i]))
-                for i, cfg in enumerate(CONFIGURATIONS)
-                if reach[i] and (inside[i] or not check_limits)]
+        out: list[IKSolution] = []
+        for i, cfg in enumerate(CONFIGURATIONS):
+            if not reach[i] or (check_limits and not inside[i]):
+                continue
+            if any(np.abs(s.q - q[i]).max() <= 1e-12 for s in out):
+                continue     # at a singularity two configurations give the same q
+            out.append(IKSolution(q[i].copy(), *cfg, bool(inside[i]), bool(wr[i]),
+                                  bool(sh[i]), bool(el[i])))
+        return out
 
     def ik_nearest(self, T, seed, configuration=None, weights=None) -> IKSolution:
         """The solution nearest ``seed`` (6,) (weighted Euclidean distance in joint space;

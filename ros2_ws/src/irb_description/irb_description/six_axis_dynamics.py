@@ -2,9 +2,10 @@
 
 The thesis (and ``model.RobotModel``) treats links 3-6 as one body on link_3 (Table 3.3). Here
 the wrist links 4, 5, 6 (and an optional payload on tool0) get the masses and box inertias of
-``wrist_links`` / ``payload`` in config/dynamics.yaml (stated assumptions, doc/six_axis.md),
-and link_3 keeps the remainder: mass, first and second moments of the lumped body minus those
-of the wrist links at q4 = q5 = q6 = 0 (parallel-axis theorem about link_3's origin). So
+``wrist_links`` in config/dynamics.yaml (stated assumptions, doc/six_axis.md), and link_3
+keeps the remainder: mass, first and second moments of the lumped body minus those of the
+wrist links at q4 = q5 = q6 = 0 (parallel-axis theorem about link_3's origin); a ``payload``
+on tool0 is added to link_6 (0 kg by default, as in the thesis). So
 
 * with joints 4-6 at 0, the six bodies add up exactly to the lumped body, and locking joints
   4-6 there (``three_axis_model``) reproduces today's three-axis dynamics (tested to 1e-9);
@@ -110,9 +111,6 @@ class SixAxisDynamics:
                                  'the thesis URDF (links 3-6 lumped on link_3)')
         # the wrist bodies (and the payload on tool0) in their joint frames
         parts = {n: wrist[f'link_{n[-1]}'].pin() for n in ('joint_4', 'joint_5', 'joint_6')}
-        tool0 = model.frames[model.getFrameId('tool0')].placement      # in link_6
-        if payload.mass > 0:
-            parts['joint_6'] = parts['joint_6'] + tool0.act(payload.pin())
         # their placement in link_3 at q4 = q5 = q6 = 0 (frames parallel there)
         m_w, first, second = 0.0, np.zeros(3), np.zeros((3, 3))
         at = pin.SE3.Identity()
@@ -124,16 +122,22 @@ class SixAxisDynamics:
             second += _second_moment(I_in_3)
         m3 = lumped.mass - m_w
         if m3 <= 0:
-            raise ValueError(f'wrist and payload ({m_w:.3f} kg) outweigh the lumped links 3-6 '
+            raise ValueError(f'the wrist links ({m_w:.3f} kg) outweigh the lumped links 3-6 '
                              f'body ({lumped.mass:.3f} kg)')
         c3 = (lumped.mass * np.asarray(lumped.lever) - first) / m3
         J3_origin = _second_moment(lumped) - second
         J3 = J3_origin - m3 * (c3 @ c3 * np.eye(3) - np.outer(c3, c3))
-        forearm = pin.Inertia(m3, c3, 0.5 * (J3 + J3.T))
-        if not is_physical(forearm):
-            raise ValueError('the forearm left after removing the wrist is not a rigid body '
-                             f'(inertia eigenvalues {np.linalg.eigvalsh(J3).round(5).tolist()})')
+        J3 = 0.5 * (J3 + J3.T)
+        ev = np.linalg.eigvalsh(J3)
+        if ev.min() <= 1e-12 or 2 * ev.max() > ev.sum() + 1e-12:
+            raise ValueError('the forearm left after removing the wrist links is not a rigid '
+                             f'body (inertia eigenvalues {ev.round(5).tolist()} kg m^2)')
+        forearm = pin.Inertia(m3, c3, J3)
         self.forearm = forearm
+        # the payload is added to link_6 (the lumped body of the thesis carries none)
+        tool0 = model.frames[model.getFrameId('tool0')].placement      # in link_6
+        if payload.mass > 0:
+            parts['joint_6'] = parts['joint_6'] + tool0.act(payload.pin())
         model.inertias[j3] = forearm
         for n, I in parts.items():
             model.inertias[model.getJointId(n)] = I
