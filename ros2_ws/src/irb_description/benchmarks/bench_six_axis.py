@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""The six-joint geometric chain along paths with a tool-orientation law (issue 30).
+
+    python ros2_ws/src/irb_description/benchmarks/bench_six_axis.py [--samples N]
+
+For each case (path type x orientation law, a 0.10 m straight nozzle as TCP unless the case
+says tool0): the TCP poses of the law at N theta samples, the six joints through the
+closed-form IK in one configuration (``orientation.joint_path6``), then the position and
+orientation error of those joints measured with the thesis's DH kinematics (``dh.py``, no
+code shared with the IK). Also the error halfway between samples when the joints are
+interpolated linearly on the planner-like grid of --grid nodes (what a joint-space player
+between the nodes would add), the joints' ranges and the largest |dq/dtheta|.
+Timings: IK per pose along the path (vectorised, one configuration), ``ik`` (all eight
+configurations, one pose) and ``ik_nearest`` per call, and the six-joint inverse dynamics
+(pinocchio RNEA and the CasADi Function) per call. Writes results/six_axis.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / 'results'
+
+
+def cases():
+    from irb_description.orientation import FixedOrientation, KeyframeSlerp, PathFrame
+    from irb_description.path import (ArcPath, LinePath, PolylinePath, SplinePath,
+                                      rectangle_path, thesis_circle)
+    from irb_description.six_axis import rot_x, rot_y, rot_z
+    down = rot_x(np.pi)
+    # the main job's gluing rectangle (irb_bringup config/thesis_run.yaml, full)
+    rect = rectangle_path([0.7, 0.0, 0.3], [0.3, 0.1, 1.0], 0.3, 0.2, 0.025)
+    u = np.array([1.0, 0.0, -0.3]) / np.hypot(1.0, 0.3)
+    v = np.array([0.0, 1.0, 0.0])
+    c = np.array([0.65, 0.0, 0.35])
+    spline = SplinePath(np.array([c + a * u + b * v for a, b in
+                                  [(-0.1, -0.15), (0.0, -0.05), (0.08, 0.05), (0.0, 0.12),
+                                   (-0.1, 0.15)]]))
+    zig = PolylinePath(np.array([c + a * u + b * v for a, b in
+                                 [(-0.1, -0.15), (0.1, -0.07), (-0.1, 0.0), (0.1, 0.07),
+                                  (-0.1, 0.15)]]), [0.02])
+    arc = ArcPath(np.array([0.65, 0.1, 0.35]), np.array([0.0, -0.3, 1.0]), 0.1, 0.5, 4.0)
+    line = LinePath(np.array([0.55, -0.25, 0.25]), np.array([0.75, 0.2, 0.45]))
+    circle = thesis_circle()
+    return [
+        ('rectangle (main job), path-normal, x fixed', rect, PathFrame(rect, x_mode='fixed'),
+         True),
+        ('rectangle (main job), path-normal, x fixed, TCP = tool0', rect,
+         PathFrame(rect, x_mode='fixed'), False),
+        ('rectangle (main job), path-normal, x tangent', rect, PathFrame(rect), True),
+        ('circle (thesis), path-normal (tool down), x fixed', circle,
+         PathFrame(circle, x_mode='fixed'), True),
+        ('arc (tilted plane, 229 deg), path-normal, x tangent', arc, PathFrame(arc), True),
+        ('line, slerp over 3 keyframes', line,
+         KeyframeSlerp([0.0, np.pi, 2 * np.pi],
+                       [down, rot_y(0.4) @ down, rot_z(0.6) @ rot_x(-0.3) @ down]), True),
+        ('polyline (zigzag, 20 mm blends), path-normal, x tangent', zig, PathFrame(zig), True),
+        ('spline (tilted plane), path-normal, x tangent', spline, PathFrame(spline), True),
+        ('spline (tilted plane), fixed orientation', spline,
+         FixedOrientation(rot_y(0.2) @ down), True),
+    ]
+
+
+def run_case(name, path, law, nozzle, kin_nozzle, kin_tool0, n, grid):
+    from irb_description.orientation import joint_path6, pose_errors, tool_poses
+    kin = kin_nozzle if nozzle else kin_tool0
+    theta = np.linspace(0.0, 2 * np.pi, n)
+    t0 = time.perf_counter()
+    jp = joint_path6(kin, path, law, theta)
+    t_path = time.perf_counter() - t0
+    pos, ori = pose_errors(kin, jp.q, jp.T)
+    # linear joint interpolation on a planner-like grid, error at the midpoints
+    tg = np.linspace(0.0, 2 * np.pi, grid)
+    qg = joint_path6(kin, path, law, tg, seed=jp.q[0]).q
+    tm = 0.5 * (tg[1:] + tg[:-1])
+    pos_m, ori_m = pose_errors(kin, 0.5 * (qg[1:] + qg[:-1]), tool_poses(path, law, tm))
+    dq = np.gradient(jp.q, theta, axis=0)
+    return {
+        'case': name, 'path_type': type(path).__name__, 'length_m': float(path.length),
+        'tcp': 'nozzle 0.10 m' if nozzle else 'tool0', 'samples': n,
+        'configuration': list(jp.configuration),
+        'position_error_max_mm': float(pos.max() * 1e3),
+        'position_error_median_mm': float(np.median(pos) * 1e3),
+        'orientation_error_max_deg': float(np.degrees(ori.max())),
+        'orientation_error_median_deg': float(np.degrees(np.median(ori))),
+        'ik_time_per_pose_us': float(t_path / n * 1e6),
+        'wrist_singular_samples': int(jp.wrist_singular.sum()),
+        'min_abs_q5_deg': float(np.degrees(np.abs(jp.q[:, 4]).min())),
+        'q_min_deg': np.degrees(jp.q.min(axis=0)).round(2).tolist(),
+        'q_max_deg': np.degrees(jp.q.max(axis=0)).round(2).tolist(),
+        'max_abs_dq_dtheta': np.abs(dq).max(axis=0).round(4).tolist(),
+        'grid_nodes': grid,
+        'linear_interp_midpoint_position_error_max_mm': float(pos_m.max() * 1e3),
+        'linear_interp_midpoint_orientation_error_max_deg': float(np.degrees(ori_m.max())),
+    }
+
+
+def time_calls(fn, args_list):
+    t = []
+    for a in args_list:
+        t0 = time.perf_counter()
+        fn(*a)
+        t.append(time.perf_counter() - t0)
+    x = np.asarray(t) * 1e6
+    return {'median_us': float(np.median(x)), 'p90_us': float(np.percentile(x, 90)),
+            'n': int(x.size)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(
+        description='Six-joint chain along paths with orientation laws: DH-checked pose '
+        'errors of the closed-form IK, IK and dynamics timings; writes results/six_axis.json.')
+    ap.add_argument('--samples', type=int, default=4001, help='theta samples per path [-]')
+    ap.add_argument('--grid', type=int, default=201,
+                    help='nodes of the planner-like grid for the interpolation error [-]')
+    ap.add_argument('--output', type=Path, default=RESULTS / 'six_axis.json')
+    ns = ap.parse_args(argv)
+    if ns.samples < 2 or ns.grid < 2:
+        ap.error('--samples and --grid must be >= 2')
+    from irb_description.six_axis import SixAxisKinematics, pose
+    from irb_description.six_axis_dynamics import SixAxisDynamics
+
+    load_start = os.getloadavg()
+    kin0 = SixAxisKinematics()
+    kin_n = SixAxisKinematics(tcp=pose(np.eye(3), [0.0, 0.0, 0.10]))
+    out = {'load_average_start': [round(x, 2) for x in load_start], 'cases': []}
+    for name, path, law, nozzle in cases():
+        r = run_case(name, path, law, nozzle, kin_n, kin0, ns.samples, ns.grid)
+        out['cases'].append(r)
+        print(f"{name}: pos {r['position_error_max_mm']:.2e} mm, ori "
+              f"{r['orientation_error_max_deg']:.2e} deg, {r['ik_time_per_pose_us']:.1f} us/pose,"
+              f" midpoints of {ns.grid}: {r['linear_interp_midpoint_position_error_max_mm']:.3f}"
+              f" mm / {r['linear_interp_midpoint_orientation_error_max_deg']:.4f} deg",
+              flush=True)
+    rng = np.random.default_rng(7)
+    Q = rng.uniform(kin_n.lower, kin_n.upper, (300, 6))
+    T = kin_n.fk(Q)
+    out['ik_all_configurations_one_pose'] = time_calls(kin_n.ik, [(t,) for t in T])
+    out['ik_nearest_one_pose'] = time_calls(kin_n.ik_nearest, list(zip(T, Q)))
+    dyn = SixAxisDynamics()
+    f = dyn.rnea_function()
+    states = [tuple(rng.uniform(-2, 2, (3, 6))) for _ in range(300)]
+    out['rnea6_pinocchio'] = time_calls(dyn.inverse_dynamics, states)
+    out['rnea6_casadi_function'] = time_calls(lambda q, qd, qdd: f(q, qd, qdd), states)
+    out['load_average_end'] = [round(x, 2) for x in os.getloadavg()]
+    out['date'] = time.strftime('%Y-%m-%d %H:%M:%S')
+    ns.output.parent.mkdir(parents=True, exist_ok=True)
+    ns.output.write_text(json.dumps(out, indent=1) + '\n')
+    print(json.dumps({k: v for k, v in out.items() if k != 'cases'}, indent=1))
+    print(f'wrote {ns.output}')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
