@@ -12,7 +12,8 @@ interpolated linearly on the planner-like grid of --grid nodes (what a joint-spa
 between the nodes would add), the joints' ranges and the largest |dq/dtheta|.
 Timings: IK per pose along the path (vectorised, one configuration), ``ik`` (all eight
 configurations, one pose) and ``ik_nearest`` per call, and the six-joint inverse dynamics
-(pinocchio RNEA and the CasADi Function) per call. Writes results/six_axis.json.
+(pinocchio RNEA and the CasADi Function) per call. Peak joint torques and speeds on the main
+job's rectangle at constant theta-dot (8 s and 6 s laps). Writes results/six_axis.json.
 """
 from __future__ import annotations
 
@@ -100,6 +101,31 @@ def run_case(name, path, law, nozzle, kin_nozzle, kin_tool0, n, grid):
     }
 
 
+def rectangle_torques(kin, n):
+    """Peak |tau| and |qd| per joint on the main job's rectangle, nozzle normal to its plane
+    (x fixed and x tangent), at constant theta-dot for the main job's 8 s and the quick job's
+    6 s, six-joint inverse dynamics without friction; against the assumed limits."""
+    from irb_description.orientation import PathFrame, joint_path6
+    from irb_description.params import load_dynamics
+    from irb_description.path import rectangle_path
+    from irb_description.six_axis_dynamics import SixAxisDynamics
+    rect = rectangle_path([0.7, 0.0, 0.3], [0.3, 0.1, 1.0], 0.3, 0.2, 0.025)
+    dyn = SixAxisDynamics()
+    theta = np.linspace(0.0, 2 * np.pi, n)
+    out = {'torque_limit_nm': load_dynamics().torque_limit.tolist(),
+           'velocity_limit_deg_s': np.degrees(kin.velocity).round(1).tolist()}
+    for x_mode in ('fixed', 'tangent'):
+        jp = joint_path6(kin, rect, PathFrame(rect, x_mode=x_mode), theta, derivatives=True)
+        for duration in (8.0, 6.0):
+            w = 2 * np.pi / duration
+            qd, qdd = jp.dq * w, jp.ddq * w**2
+            tau = np.array([dyn.inverse_dynamics(q, a, b) for q, a, b in zip(jp.q, qd, qdd)])
+            out[f'x_{x_mode}_{duration:g}s'] = {
+                'peak_abs_tau_nm': [float(f'{x:.4g}') for x in np.abs(tau).max(axis=0)],
+                'peak_abs_qd_deg_s': np.degrees(np.abs(qd).max(axis=0)).round(1).tolist()}
+    return out
+
+
 def time_calls(fn, args_list):
     t = []
     for a in args_list:
@@ -137,6 +163,8 @@ def main(argv=None) -> int:
               f" midpoints of {ns.grid}: {r['linear_interp_midpoint_position_error_max_mm']:.3f}"
               f" mm / {r['linear_interp_midpoint_orientation_error_max_deg']:.4f} deg",
               flush=True)
+    out['rectangle_torques'] = rectangle_torques(kin_n, ns.samples)
+    print('rectangle torques:', json.dumps(out['rectangle_torques']), flush=True)
     rng = np.random.default_rng(7)
     Q = rng.uniform(kin_n.lower, kin_n.upper, (300, 6))
     T = kin_n.fk(Q)
