@@ -342,8 +342,9 @@ class SixAxisKinematics:
 
     def ik(self, T, q_ref=None, check_limits: bool = True) -> list[IKSolution]:
         """All closed-form solutions (up to 8, one per configuration, in the order of
-        ``CONFIGURATIONS``) for one TCP pose T (4, 4); with ``check_limits`` only those inside
-        the joint limits. Empty list: the pose is unreachable (or outside the limits)."""
+        ``CONFIGURATIONS``; where two configurations give the same q at a singularity, once)
+        for one TCP pose T (4, 4); with ``check_limits`` only those inside the joint limits.
+        Empty list: the pose is unreachable (or outside the limits)."""
         q, reach, inside, wr, sh, el = self._all(T, q_ref, CONFIGURATIONS)
         out: list[IKSolution] = []
         for i, cfg in enumerate(CONFIGURATIONS):
