@@ -7,9 +7,10 @@ For each case (path type x orientation law, a 0.10 m straight nozzle as TCP unle
 says tool0): the TCP poses of the law at N theta samples, the six joints through the
 closed-form IK in one configuration (``orientation.joint_path6``), then the position and
 orientation error of those joints measured with the thesis's DH kinematics (``dh.py``, no
-code shared with the IK). Also the error halfway between samples when the joints are
-interpolated linearly on the planner-like grid of --grid nodes (what a joint-space player
-between the nodes would add), the joints' ranges and the largest |dq/dtheta|.
+code shared with the IK). Also the error halfway between the nodes of a --grid profile grid
+(irb_control's profiles use 721) when the joints are interpolated there linearly or by cubic
+Hermite with dq/dtheta (what a player between the nodes adds), the joints' ranges and the
+largest |dq/dtheta|.
 Timings: IK per pose along the path (vectorised, one configuration), ``ik`` (all eight
 configurations, one pose) and ``ik_nearest`` per call, and the six-joint inverse dynamics
 (pinocchio RNEA and the CasADi Function) per call. Peak joint torques and speeds on the main
@@ -75,11 +76,15 @@ def run_case(name, path, law, nozzle, kin_nozzle, kin_tool0, n, grid):
     jp = joint_path6(kin, path, law, theta)
     t_path = time.perf_counter() - t0
     pos, ori = pose_errors(kin, jp.q, jp.T)
-    # linear joint interpolation on a planner-like grid, error at the midpoints
+    # joints on the controller's profile grid, interpolated: error at the midpoints
     tg = np.linspace(0.0, 2 * np.pi, grid)
-    qg = joint_path6(kin, path, law, tg, seed=jp.q[0]).q
+    g = joint_path6(kin, path, law, tg, seed=jp.q[0], derivatives=True)
     tm = 0.5 * (tg[1:] + tg[:-1])
-    pos_m, ori_m = pose_errors(kin, 0.5 * (qg[1:] + qg[:-1]), tool_poses(path, law, tm))
+    Tm = tool_poses(path, law, tm)
+    pos_m, ori_m = pose_errors(kin, 0.5 * (g.q[1:] + g.q[:-1]), Tm)
+    hq = (tg[1] - tg[0]) / 8.0
+    q_herm = 0.5 * (g.q[1:] + g.q[:-1]) + hq * (g.dq[:-1] - g.dq[1:])
+    pos_h, ori_h = pose_errors(kin, q_herm, Tm)
     dq = np.gradient(jp.q, theta, axis=0)
     return {
         'case': name, 'path_type': type(path).__name__, 'length_m': float(path.length),
@@ -98,6 +103,8 @@ def run_case(name, path, law, nozzle, kin_nozzle, kin_tool0, n, grid):
         'grid_nodes': grid,
         'linear_interp_midpoint_position_error_max_mm': float(pos_m.max() * 1e3),
         'linear_interp_midpoint_orientation_error_max_deg': float(np.degrees(ori_m.max())),
+        'hermite_interp_midpoint_position_error_max_mm': float(pos_h.max() * 1e3),
+        'hermite_interp_midpoint_orientation_error_max_deg': float(np.degrees(ori_h.max())),
     }
 
 
@@ -142,8 +149,9 @@ def main(argv=None) -> int:
         description='Six-joint chain along paths with orientation laws: DH-checked pose '
         'errors of the closed-form IK, IK and dynamics timings; writes results/six_axis.json.')
     ap.add_argument('--samples', type=int, default=4001, help='theta samples per path [-]')
-    ap.add_argument('--grid', type=int, default=201,
-                    help='nodes of the planner-like grid for the interpolation error [-]')
+    ap.add_argument('--grid', type=int, default=721,
+                    help="nodes of the profile grid for the interpolation error [-] "
+                    "(irb_control's profiles: 721)")
     ap.add_argument('--output', type=Path, default=RESULTS / 'six_axis.json')
     ns = ap.parse_args(argv)
     if ns.samples < 2 or ns.grid < 2:
@@ -160,8 +168,11 @@ def main(argv=None) -> int:
         out['cases'].append(r)
         print(f"{name}: pos {r['position_error_max_mm']:.2e} mm, ori "
               f"{r['orientation_error_max_deg']:.2e} deg, {r['ik_time_per_pose_us']:.1f} us/pose,"
-              f" midpoints of {ns.grid}: {r['linear_interp_midpoint_position_error_max_mm']:.3f}"
-              f" mm / {r['linear_interp_midpoint_orientation_error_max_deg']:.4f} deg",
+              f" midpoints of {ns.grid} linear: "
+              f"{r['linear_interp_midpoint_position_error_max_mm']:.4f} mm / "
+              f"{r['linear_interp_midpoint_orientation_error_max_deg']:.4f} deg, Hermite: "
+              f"{r['hermite_interp_midpoint_position_error_max_mm']:.2e} mm / "
+              f"{r['hermite_interp_midpoint_orientation_error_max_deg']:.2e} deg",
               flush=True)
     out['rectangle_torques'] = rectangle_torques(kin_n, ns.samples)
     print('rectangle torques:', json.dumps(out['rectangle_torques']), flush=True)

@@ -167,6 +167,69 @@ class KeyframeSlerp(OrientationLaw):
         return self._slerp(np.clip(theta, self.thetas[0], self.thetas[-1])).as_matrix()
 
 
+#: key of a path mapping's optional orientation block (``orientation_from_spec``)
+ORIENTATION_KEY = 'orientation'
+LAWS = ('fixed', 'path_normal', 'slerp')
+
+
+def _rotation_spec(entry, what) -> np.ndarray:
+    """A rotation from {rpy: [r, p, y]} (URDF fixed-axis, rad) or {z: [..], x: [..]}."""
+    from .six_axis import rpy_matrix
+    if not isinstance(entry, dict):
+        raise ValueError(f'{what}: a mapping with rpy [rad] or z and x (tool axes in base_link)')
+    if 'rpy' in entry and set(entry) <= {'rpy', 'theta'}:
+        rpy = np.asarray(entry['rpy'], float)
+        if rpy.shape != (3,) or not np.all(np.isfinite(rpy)):
+            raise ValueError(f'{what}: rpy must be 3 finite numbers [rad]')
+        return rpy_matrix(rpy)
+    if 'z' in entry and set(entry) <= {'z', 'x', 'theta'}:
+        return frame_from_axes(np.asarray(entry['z'], float),
+                               np.asarray(entry.get('x', [1.0, 0.0, 0.0]), float))
+    raise ValueError(f'{what}: give rpy [rad] or z (and x), got keys {sorted(entry)}')
+
+
+def orientation_from_spec(spec: dict, path: PathBase) -> OrientationLaw:
+    """A law from a plain mapping (a path file's ``orientation`` block):
+
+    law 'fixed': rpy [rad] (URDF convention, R = Rz Ry Rx) or z (and x) tool axes;
+    'path_normal': normal (optional), approach ('against'), x_mode ('tangent'), x_ref;
+    'slerp': keyframes [{theta [rad], rpy or z/x}, ...] (theta increasing, >= 2).
+    ValueError with one line naming what is wrong.
+    """
+    if not isinstance(spec, dict):
+        raise ValueError('an orientation spec must be a mapping with a "law"')
+    law = spec.get('law')
+    known = {'fixed': {'rpy', 'z', 'x'}, 'path_normal': {'normal', 'approach', 'x_mode', 'x_ref'},
+             'slerp': {'keyframes'}}
+    if law not in known:
+        raise ValueError(f'orientation law must be one of {list(LAWS)}, got {law!r}')
+    extra = set(spec) - known[law] - {'law'}
+    if extra:
+        raise ValueError(f'orientation law {law!r} takes {sorted(known[law])}, '
+                         f'not {sorted(extra)}')
+    try:
+        if law == 'fixed':
+            return FixedOrientation(_rotation_spec({k: v for k, v in spec.items()
+                                                    if k != 'law'}, 'fixed'))
+        if law == 'path_normal':
+            def vec(key):
+                return None if spec.get(key) is None else np.asarray(spec[key], float)
+            return PathFrame(path, vec('normal'), spec.get('approach', 'against'),
+                             spec.get('x_mode', 'tangent'), vec('x_ref'))
+        frames = spec.get('keyframes')
+        if not isinstance(frames, list) or len(frames) < 2:
+            raise ValueError('slerp needs keyframes: a list of >= 2 {theta, rpy or z/x}')
+        thetas = []
+        for i, f in enumerate(frames):
+            if not isinstance(f, dict) or 'theta' not in f:
+                raise ValueError(f'keyframe {i} needs theta [rad]')
+            thetas.append(float(f['theta']))
+        return KeyframeSlerp(thetas, [_rotation_spec(f, f'keyframe {i}')
+                                      for i, f in enumerate(frames)])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'orientation {law}: {exc}') from None
+
+
 def tool_poses(path: PathBase, law: OrientationLaw, theta) -> np.ndarray:
     """TCP poses (N, 4, 4) in base_link: the path's point and the law's rotation at theta."""
     theta = np.atleast_1d(np.asarray(theta, float))

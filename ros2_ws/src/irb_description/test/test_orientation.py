@@ -182,3 +182,30 @@ def test_fixed_orientation_checks_its_matrix():
         FixedOrientation(2 * np.eye(3))
     R = FixedOrientation.from_axes([0, 0, -1], [1, 1, 0]).R
     assert_allclose(R, Rotation.from_euler('xz', [np.pi, np.pi / 4]).as_matrix(), atol=1e-12)
+
+
+def test_orientation_from_spec_builds_each_law_and_refuses_bad_blocks():
+    from irb_description.orientation import orientation_from_spec
+    rect = rectangle()
+    theta = np.linspace(0.0, 2 * np.pi, 9)
+    law = orientation_from_spec({'law': 'path_normal', 'x_mode': 'fixed'}, rect)
+    assert_allclose(law.rotation(theta), PathFrame(rect, x_mode='fixed').rotation(theta),
+                    atol=0)
+    fixed = orientation_from_spec({'law': 'fixed', 'rpy': [np.pi, 0.0, 0.0]}, rect)
+    assert_allclose(fixed.rotation(theta)[3], DOWN, atol=1e-15)
+    axes = orientation_from_spec({'law': 'fixed', 'z': [0, 0, -1], 'x': [1, 0, 0]}, rect)
+    assert_allclose(axes.R, DOWN, atol=1e-15)
+    sl = orientation_from_spec({'law': 'slerp', 'keyframes': [
+        {'theta': 0.0, 'rpy': [np.pi, 0, 0]}, {'theta': 6.0, 'z': [0, 0, -1], 'x': [0, 1, 0]}]},
+        rect)
+    assert_allclose(sl.rotation(np.array([6.0]))[0], rot_z(np.pi / 2) @ DOWN, atol=1e-12)
+    for bad, msg in [({'law': 'wobble'}, 'one of'),
+                     ({'law': 'fixed', 'rpy': [0, 0]}, 'rpy must be 3'),
+                     ({'law': 'fixed', 'rpy': [0, 0, 0], 'normal': [0, 0, 1]}, 'takes'),
+                     ({'law': 'path_normal', 'x_mode': 'spin'}, 'x_mode'),
+                     ({'law': 'slerp', 'keyframes': [{'theta': 0.0, 'rpy': [0, 0, 0]}]},
+                      '>= 2'),
+                     ({'law': 'slerp', 'keyframes': [{'rpy': [0, 0, 0]}, {'theta': 1}]},
+                      'needs theta')]:
+        with pytest.raises(ValueError, match=msg):
+            orientation_from_spec(bad, rect)
