@@ -12,7 +12,8 @@ code shared with the IK). Also the error halfway between the nodes of a --grid p
 Hermite with dq/dtheta (what a player between the nodes adds), the joints' ranges and the
 largest |dq/dtheta|.
 Timings: IK per pose along the path (vectorised, one configuration), ``ik`` (all eight
-configurations, one pose) and ``ik_nearest`` per call, and the six-joint inverse dynamics
+configurations, one pose), ``ik_nearest``, ``ik_config`` and ``ik_one`` (one configuration,
+one pose; numpy / plain floats) per call, and the six-joint inverse dynamics
 (pinocchio RNEA and the CasADi Function) per call. Peak joint torques and speeds on the main
 job's rectangle at constant theta-dot (8 s and 6 s laps). Writes results/six_axis.json.
 """
@@ -181,6 +182,11 @@ def main(argv=None) -> int:
     T = kin_n.fk(Q)
     out['ik_all_configurations_one_pose'] = time_calls(kin_n.ik, [(t,) for t in T])
     out['ik_nearest_one_pose'] = time_calls(kin_n.ik_nearest, list(zip(T, Q)))
+    cfg = ('front', 'up', 'noflip')
+    out['ik_config_one_pose'] = time_calls(lambda t, q: kin_n.ik_config(t, cfg, q),
+                                           list(zip(T, Q)))
+    out['ik_one_plain_floats'] = time_calls(lambda t, q: kin_n.ik_one(t, cfg, q),
+                                            list(zip(T, Q)))
     dyn = SixAxisDynamics()
     f = dyn.rnea_function()
     states = [tuple(rng.uniform(-2, 2, (3, 6))) for _ in range(300)]

@@ -310,6 +310,78 @@ class SixAxisKinematics:
         q, inside = self._representative(q, ref)
         return q, reachable, inside & reachable, wr_sing, sh_sing & reachable, el_sing
 
+    def ik_one(self, T, configuration=('front', 'up', 'noflip'), q_ref=None
+               ) -> tuple[list[float] | None, bool, bool]:
+        """``ik_config`` for one pose in plain floats (no numpy per step: for a control loop).
+
+        Returns (q as 6 floats, within_limits, wrist_singular), or (None, False, False) when
+        the pose is out of reach. Same branches, singular choices and 2 pi representatives as
+        ``ik_config`` (tested equal); the pose is not checked for being a rotation.
+        """
+        import math
+        sh, el, wr = configuration
+        if sh not in SHOULDERS or el not in ELBOWS or wr not in WRISTS:
+            raise ValueError(f'not a configuration: {configuration!r}')
+        ref = [0.0] * 6 if q_ref is None else [float(v) for v in q_ref]
+        M = (np.asarray(T, float) @ self._tcp_inv @ self._tool0_inv).tolist()
+        x6, y6, z6 = M[0][0], M[1][0], M[2][0]
+        d6 = self._d6
+        x, y, z = M[0][3] - d6 * x6, M[1][3] - d6 * y6, M[2][3] - d6 * z6
+        rho = math.hypot(x, y)
+        sh_sing = rho < self.shoulder_tol
+        q1 = ref[0] if sh_sing else math.atan2(y, x)
+        sign = 1.0
+        if sh == 'back':
+            q1 += math.pi
+            sign = -1.0
+        r = (0.0 if sh_sing else sign * rho) - float(self._shoulder[0])
+        s_ = z - float(self._shoulder[1])
+        ur, us = float(self._u[0]), float(self._u[1])
+        fr, fs = float(self._f[0]), float(self._f[1])
+        kk = 0.5 * (r * r + s_ * s_ - ur * ur - us * us - fr * fr - fs * fs) / self._K
+        if abs(kk) > 1.0 + self.elbow_tol:
+            return None, False, False
+        acos = math.acos(max(-1.0, min(1.0, kk)))
+        q3 = self._phi + (acos if el == 'up' else -acos)
+        c3, s3 = math.cos(q3), math.sin(q3)
+        v_r = ur + fr * c3 + fs * s3
+        v_s = us - fr * s3 + fs * c3
+        q2 = math.atan2(v_s * r - v_r * s_, v_r * r + v_s * s_)
+        # M3 = (Rz(q1) Ry(q23))^T R6, element by element
+        c1, s1 = math.cos(q1), math.sin(q1)
+        c23, s23 = math.cos(q2 + q3), math.sin(q2 + q3)
+        R3 = ((c1 * c23, -s1, c1 * s23), (s1 * c23, c1, s1 * s23), (-s23, 0.0, c23))
+        W = [[sum(R3[k][i] * M[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+        sb = math.hypot(W[1][0], W[2][0])
+        if sb < self.wrist_tol:
+            q4 = ref[3]
+            c4, s4 = math.cos(q4), math.sin(q4)
+            # rows of Rx(-q4) W
+            w0 = W[0]
+            w1 = [c4 * W[1][j] + s4 * W[2][j] for j in range(3)]
+            w2 = [-s4 * W[1][j] + c4 * W[2][j] for j in range(3)]
+            q5 = math.atan2(-w2[0], w0[0])
+            q6 = math.atan2(-w1[2], w1[1])
+        else:
+            q5 = math.atan2(sb, W[0][0])
+            q4 = math.atan2(W[1][0], -W[2][0])
+            q6 = math.atan2(W[0][1], W[0][2])
+            if wr == 'flip':
+                q5, q4, q6 = -q5, q4 + math.pi, q6 + math.pi
+        q = [q1, q2, q3, q4, q5, q6]
+        inside = True
+        for j in range(6):
+            v = (q[j] + math.pi) % TWO_PI - math.pi
+            lo, hi = float(self.lower[j]), float(self.upper[j])
+            kmin = math.ceil((lo - v) / TWO_PI - 1e-12)
+            kmax = math.floor((hi - v) / TWO_PI + 1e-12)
+            if kmin <= kmax:
+                v += TWO_PI * min(max(round((ref[j] - v) / TWO_PI), kmin), kmax)
+            else:
+                inside = False
+            q[j] = v
+        return q, inside, sb < self.wrist_tol
+
     def _representative(self, q, ref):
         """Shift q1, q3, q4, q6 by multiples of 2 pi to the value inside the limits nearest
         the reference; q2 and q5 (ranges under 2 pi) only wrapped to (-pi, pi]."""

@@ -159,3 +159,22 @@ def test_rotation_error_is_the_angle(rng):
         K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
         R = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
         assert rotation_error(R0, R0 @ R) == pytest.approx(a, rel=1e-6, abs=1e-15)
+
+
+def test_ik_one_in_plain_floats_equals_ik_config(kin_tcp, rng):
+    """The control-loop form: same branches, representatives and singular choice."""
+    k = kin_tcp
+    Q = rng.uniform(k.lower, k.upper, (50, 6))
+    refs = rng.uniform(k.lower, k.upper, (50, 6))      # random: no ties between two turns
+    Q[:5, 4] = 0.0                                       # and a few wrist-singular poses
+    for q, ref in zip(Q, refs):
+        T = k.fk(q)
+        for cfg in CONFIGURATIONS:
+            r = k.ik_config(T, cfg, ref)
+            q1, inside, wsing = k.ik_one(T, cfg, ref)
+            if not r.reachable[0]:
+                assert q1 is None
+                continue
+            assert np.abs(np.asarray(q1) - r.q[0]).max() <= 1e-12
+            assert inside == r.within_limits[0] and wsing == r.wrist_singular[0]
+    assert k.ik_one(pose(np.eye(3), [2.0, 0.0, 0.5])) == (None, False, False)
