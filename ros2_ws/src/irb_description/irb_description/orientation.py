@@ -268,7 +268,8 @@ def _continuous(kin: SixAxisKinematics, q: np.ndarray, start: np.ndarray) -> np.
 
 def joint_path6(kin: SixAxisKinematics, path: PathBase, law: OrientationLaw, theta,
                 configuration=None, seed=None, max_step: float = np.pi / 4,
-                derivatives: bool = False, h: float = 1e-4) -> JointPath6:
+                derivatives: bool = False, h: float = 1e-4,
+                wrist_switch: bool = False) -> JointPath6:
     """The six joint angles along ``path`` with ``law`` at theta (N,) (increasing).
 
     ``configuration`` (shoulder, elbow, wrist) kept all along; default: the one of the
@@ -278,8 +279,11 @@ def joint_path6(kin: SixAxisKinematics, path: PathBase, law: OrientationLaw, the
     sample the one nearest the previous. Raises UnreachablePoseError naming theta and the
     point when a sample is unreachable, a joint leaves its limits or a joint steps by more
     than ``max_step`` [rad] between two samples (a configuration change, e.g. passing the
-    wrist singularity with the wrist flag kept). ``derivatives``: dq/dtheta and
-    d2q/dtheta2 by central differences of step ``h`` [rad] through the same solution.
+    wrist singularity with the wrist flag kept). ``wrist_switch``: shoulder and elbow kept,
+    the wrist flag chosen sample by sample nearest the previous joints, so a path through
+    q5 = 0 stays continuous (``configuration`` then reads (shoulder, elbow, 'switch')).
+    ``derivatives``: dq/dtheta and d2q/dtheta2 by central differences of step ``h`` [rad]
+    through the same solution.
     """
     theta = np.atleast_1d(np.asarray(theta, float))
     if theta.ndim != 1 or theta.size < 1 or np.any(np.diff(theta) <= 0):
@@ -294,19 +298,40 @@ def joint_path6(kin: SixAxisKinematics, path: PathBase, law: OrientationLaw, the
     errors = []
     for cfg in cfgs:
         try:
-            q, wr, sh = _solve_path(kin, T, theta, cfg, seed, max_step)
+            q, wr, sh = _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch)
         except UnreachablePoseError as exc:
             errors.append(str(exc))
             continue
         dq = ddq = None
         if derivatives:
-            dq, ddq = _derivatives(kin, path, law, theta, q, cfg, h)
-        return JointPath6(theta, q, T, cfg, wr, sh, dq, ddq)
+            dq, ddq = _derivatives(kin, path, law, theta, q, cfg, h, wrist_switch)
+        name = (cfg[0], cfg[1], 'switch') if wrist_switch else cfg
+        return JointPath6(theta, q, T, name, wr, sh, dq, ddq)
     raise UnreachablePoseError(errors[0] if len(errors) == 1 else
                                'no configuration solves the whole path: ' + errors[0])
 
 
-def _solve_path(kin, T, theta, cfg, seed, max_step):
+def _other_wrist(cfg):
+    return (cfg[0], cfg[1], 'flip' if cfg[2] == 'noflip' else 'noflip')
+
+
+def _nearest_turn(q, ref):
+    """q (N, 6) shifted joint by joint by whole turns to the value nearest ref (N, 6)."""
+    return q - TWO_PI * np.round((q - ref) / TWO_PI)
+
+
+def _pick_wrist(qa, qb, start):
+    """Sample by sample the one of two wrist solutions nearest the previous sample."""
+    out = np.empty_like(qa)
+    prev = start
+    for k in range(qa.shape[0]):
+        a = _nearest_turn(qa[k], prev)
+        b = _nearest_turn(qb[k], prev)
+        prev = out[k] = a if np.sum((a - prev) ** 2) <= np.sum((b - prev) ** 2) else b
+    return out
+
+
+def _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch=False):
     n = T.shape[0]
     ref = np.zeros(6) if seed is None else np.asarray(seed, float)
     r = kin.ik_config(T, cfg, ref, check_limits=False)
@@ -319,10 +344,14 @@ def _solve_path(kin, T, theta, cfg, seed, max_step):
     # first sample: the representative nearest the seed inside the limits
     first = kin.ik_config(T[:1], cfg, ref)
     start = first.q[0] if first.within_limits[0] else q[0]
+    if wrist_switch:
+        q = _pick_wrist(q, kin.ik_config(T, _other_wrist(cfg), ref, check_limits=False).q,
+                        start)
     q = _continuous(kin, q, start)
     # wrist singular samples: keep q4 from the previous sample (defined split of q4 + q6)
     for k in np.flatnonzero(r.wrist_singular):
         prev = q[k - 1] if k > 0 else start
+        # flip and noflip coincide here: either configuration gives the same joints
         rk = kin.ik_config(T[k:k + 1], cfg, prev, check_limits=False)
         q[k] = rk.q[0]
         if k + 1 < n:
@@ -354,14 +383,17 @@ def _solve_path(kin, T, theta, cfg, seed, max_step):
     return q, r.wrist_singular.copy(), r.shoulder_singular.copy()
 
 
-def _derivatives(kin, path, law, theta, q, cfg, h):
+def _derivatives(kin, path, law, theta, q, cfg, h, wrist_switch=False):
     """Central differences of the IK at theta +- h, each sample's solution continued from q."""
     def at(th):
         T = tool_poses(path, law, th)
-        r = kin.ik_config(T, cfg, q, check_limits=False)
-        qq = r.q.copy()
         # nearest 2 pi representative to the centre sample, joint by joint
-        return q + (qq - q) - TWO_PI * np.round((qq - q) / TWO_PI)
+        qa = _nearest_turn(kin.ik_config(T, cfg, q, check_limits=False).q, q)
+        if not wrist_switch:
+            return qa
+        qb = _nearest_turn(kin.ik_config(T, _other_wrist(cfg), q, check_limits=False).q, q)
+        a_near = np.sum((qa - q) ** 2, axis=1) <= np.sum((qb - q) ** 2, axis=1)
+        return np.where(a_near[:, None], qa, qb)
     # near the ends the stencil is shifted inside [0, 2 pi] (paths are not evaluated
     # outside it), then carried back to theta to first order
     shift = np.clip(h - theta, 0.0, None) - np.clip(theta + h - TWO_PI, 0.0, None)

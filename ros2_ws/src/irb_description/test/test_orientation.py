@@ -209,3 +209,55 @@ def test_orientation_from_spec_builds_each_law_and_refuses_bad_blocks():
                       'needs theta')]:
         with pytest.raises(ValueError, match=msg):
             orientation_from_spec(bad, rect)
+
+
+class _JointLine:
+    """A 'path' whose TCP poses are FK of a straight line in joint space (point, d_point)."""
+
+    def __init__(self, kin, qa, qb):
+        self.kin, self.qa, self.qb = kin, np.asarray(qa, float), np.asarray(qb, float)
+        self.breaks = np.zeros(0)
+
+    def q(self, theta):
+        s = np.asarray(theta, float)[..., None] / (2 * np.pi)
+        return self.qa + s * (self.qb - self.qa)
+
+    def point(self, theta):
+        return self.kin.fk(np.atleast_2d(self.q(theta)))[:, :3, 3]
+
+    def d_point(self, theta):
+        d = 1e-7
+        return (self.point(np.asarray(theta) + d) - self.point(np.asarray(theta) - d)) / (2 * d)
+
+
+class _JointLineLaw(OrientationLaw):
+    def __init__(self, line):
+        self.line = line
+
+    def rotation(self, theta):
+        return self.line.kin.fk(np.atleast_2d(self.line.q(theta)))[:, :3, :3]
+
+
+def test_wrist_switch_follows_a_path_through_q5_zero(kin):
+    """q5 from +0.3 to -0.3 rad (through 0 at a sample): with the wrist flag kept the path is
+    refused (q4, q6 would jump by pi); with wrist_switch it is followed, exactly."""
+    line = _JointLine(kin, [-0.3, 0.3, -0.2, 0.2, 0.3, 0.1], [0.3, 0.4, -0.1, 0.5, -0.3, -0.4])
+    law = _JointLineLaw(line)
+    theta = np.linspace(0.0, 2 * np.pi, 201)
+    with pytest.raises(UnreachablePoseError, match='jumps'):
+        joint_path6(kin, line, law, theta, configuration=('front', 'up', 'noflip'))
+    jp = joint_path6(kin, line, law, theta, configuration=('front', 'up', 'noflip'),
+                     wrist_switch=True, derivatives=True)
+    assert jp.configuration == ('front', 'up', 'switch')
+    pos, ori = pose_errors(kin, jp.q, jp.T)
+    assert pos.max() <= 1e-9 and ori.max() <= 1e-9
+    exact = line.q(theta)
+    singular = np.flatnonzero(jp.wrist_singular)
+    regular = np.setdiff1d(np.arange(201), singular)
+    assert_allclose(jp.q[regular], exact[regular], atol=1e-9)
+    assert np.abs(np.diff(jp.q, axis=0)).max() < 0.02
+    assert singular.size <= 1             # q5 = 0 at theta = pi (to rounding)
+    # dq/dtheta is the line's slope, but where q4 is kept at the singular sample
+    far = np.all(np.abs(np.arange(201)[:, None] - singular[None, :]) > 1, axis=1)
+    assert_allclose(jp.dq[far], np.broadcast_to((line.qb - line.qa) / (2 * np.pi),
+                                                (int(far.sum()), 6)), atol=1e-6)
