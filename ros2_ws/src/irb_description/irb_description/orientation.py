@@ -332,7 +332,6 @@ def _pick_wrist(qa, qb, start):
 
 
 def _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch=False):
-    n = T.shape[0]
     ref = np.zeros(6) if seed is None else np.asarray(seed, float)
     r = kin.ik_config(T, cfg, ref, check_limits=False)
     if not np.all(r.reachable):
@@ -352,10 +351,9 @@ def _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch=False):
     for k in np.flatnonzero(r.wrist_singular):
         prev = q[k - 1] if k > 0 else start
         # flip and noflip coincide here: either configuration gives the same joints
-        rk = kin.ik_config(T[k:k + 1], cfg, prev, check_limits=False)
-        q[k] = rk.q[0]
-        if k + 1 < n:
-            q[k + 1:] = _continuous(kin, q[k + 1:], q[k])
+        q[k] = kin.ik_config(T[k:k + 1], cfg, prev, check_limits=False).q[0]
+    if np.any(r.wrist_singular):
+        q = _continuous(kin, q, start)      # the samples after them follow the new q6
     # the whole path's 2 pi shift of q1, q3, q4, q6 that keeps it inside the limits,
     # nearest the start chosen above
     for j in (0, 2, 3, 5):
