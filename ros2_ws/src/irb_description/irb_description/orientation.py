@@ -354,13 +354,6 @@ def _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch=False):
         q[k] = kin.ik_config(T[k:k + 1], cfg, prev, check_limits=False).q[0]
     if np.any(r.wrist_singular):
         q = _continuous(kin, q, start)      # the samples after them follow the new q6
-    # the whole path's 2 pi shift of q1, q3, q4, q6 that keeps it inside the limits,
-    # nearest the start chosen above
-    for j in (0, 2, 3, 5):
-        kmin = np.ceil((kin.lower[j] - q[:, j].min()) / TWO_PI - 1e-12)
-        kmax = np.floor((kin.upper[j] - q[:, j].max()) / TWO_PI + 1e-12)
-        if kmin <= kmax:
-            q[:, j] += TWO_PI * np.clip(np.round((start[j] - q[0, j]) / TWO_PI), kmin, kmax)
     step = np.abs(np.diff(q, axis=0))
     if np.any(step > max_step):
         k, j = np.unravel_index(int(np.argmax(step)), step.shape)
@@ -369,14 +362,37 @@ def _solve_path(kin, T, theta, cfg, seed, max_step, wrist_switch=False):
             f'{np.degrees(step[k, j]):.1f} deg between theta = {theta[k]:.4f} and '
             f'{theta[k + 1]:.4f} rad near {np.round(T[k, :3, 3], 4).tolist()} m (a singularity '
             'or a configuration change)')
-    ok = kin.within_limits(q)
-    if not np.all(ok):
-        k = int(np.argmin(ok))
-        bad = [kin.joint_names[j] for j in range(6)
-               if not kin.lower[j] - 1e-12 <= q[k, j] <= kin.upper[j] + 1e-12]
+    # limits at the samples and between them: a joint with curvature q'' rises at most
+    # |q''| dtheta^2 / 8 above its chord (as path.check_joint_path)
+    def envelope(q):
+        if q.shape[0] <= 2:
+            return q, q
+        h = np.diff(theta)[:, None]
+        ddq = np.zeros_like(q)
+        ddq[1:-1] = 2 * ((q[2:] - q[1:-1]) / h[1:] - (q[1:-1] - q[:-2]) / h[:-1]) / (
+            h[1:] + h[:-1])
+        bulge = np.maximum(np.abs(ddq[:-1]), np.abs(ddq[1:])) * h**2 / 8
+        return (np.vstack([q, np.maximum(q[:-1], q[1:]) + bulge]),
+                np.vstack([q, np.minimum(q[:-1], q[1:]) - bulge]))
+    hi, lo = envelope(q)
+    # the whole path's 2 pi shift of q1, q3, q4, q6 that keeps it inside the limits,
+    # nearest the start chosen above
+    for j in (0, 2, 3, 5):
+        kmin = np.ceil((kin.lower[j] - lo[:, j].min()) / TWO_PI - 1e-12)
+        kmax = np.floor((kin.upper[j] - hi[:, j].max()) / TWO_PI + 1e-12)
+        if kmin <= kmax:
+            shift = TWO_PI * np.clip(np.round((start[j] - q[0, j]) / TWO_PI), kmin, kmax)
+            q[:, j] += shift
+            hi[:, j] += shift
+            lo[:, j] += shift
+    out = (hi > kin.upper + 1e-12) | (lo < kin.lower - 1e-12)
+    if np.any(out):
+        row = int(np.argmax(out.any(axis=1)))
+        k = row if row < q.shape[0] else row - q.shape[0]     # a segment: its first sample
+        bad = [kin.joint_names[j] for j in np.flatnonzero(out[row])]
         raise UnreachablePoseError(
-            f'configuration {cfg}: {bad} outside their limits at theta = {theta[k]:.4f} rad, '
-            f'point {np.round(T[k, :3, 3], 4).tolist()} m '
+            f'configuration {cfg}: {bad} outside their limits at or after theta = '
+            f'{theta[k]:.4f} rad, point {np.round(T[k, :3, 3], 4).tolist()} m '
             f'(q = {np.degrees(q[k]).round(1).tolist()} deg)')
     return q, r.wrist_singular.copy(), r.shoulder_singular.copy()
 

@@ -261,3 +261,23 @@ def test_wrist_switch_follows_a_path_through_q5_zero(kin):
     far = np.all(np.abs(np.arange(201)[:, None] - singular[None, :]) > 1, axis=1)
     assert_allclose(jp.dq[far], np.broadcast_to((line.qb - line.qa) / (2 * np.pi),
                                                 (int(far.sum()), 6)), atol=1e-6)
+
+
+class _JointCurve(_JointLine):
+    """Joint 5 bulging towards its +115 deg limit between samples: 1.92 + 0.089 sin(theta/2)
+    rad peaks at 2.009 rad (limit 2.0071) while the samples every 72 deg stay below."""
+
+    def q(self, theta):
+        th = np.asarray(theta, float)
+        q = np.broadcast_to(self.qa, th.shape + (6,)).copy()
+        q[..., 4] = 1.92 + 0.089 * np.sin(th / 2)
+        return q
+
+
+def test_a_limit_crossed_between_samples_is_refused(kin):
+    curve = _JointCurve(kin, [0.1, 0.3, -0.2, 0.4, 1.92, 0.1], np.zeros(6))
+    law = _JointLineLaw(curve)
+    coarse = np.linspace(0.0, 2 * np.pi, 6)
+    assert np.all(curve.q(coarse)[:, 4] < kin.upper[4]) and kin.upper[4] < 1.92 + 0.089
+    with pytest.raises(UnreachablePoseError, match=r"\['joint_5'\] outside their limits"):
+        joint_path6(kin, curve, law, coarse, configuration=('front', 'up', 'noflip'))
