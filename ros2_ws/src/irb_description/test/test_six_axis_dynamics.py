@@ -75,6 +75,30 @@ def test_gravity_is_the_gradient_of_the_potential_energy(model, dyn, rng):
         assert_allclose(dyn.gravity(q), grad, atol=1e-5)
 
 
+def test_kinetic_energy_is_half_qd_m_qd(model, dyn, rng):
+    """Independent of pinocchio: each body's velocity and angular velocity from six_axis's
+    numpy FK by central differences along qd, 1/2 sum (m |v_c|^2 + w^T R I R^T w), against
+    1/2 qd^T M(q) qd (masses, CoMs and rotational inertias of the wrist all enter)."""
+    kin = SixAxisKinematics(model.kinematics)
+    bodies = [dyn.model.inertias[i] for i in range(1, 7)]
+    eps = 1e-6
+    for _ in range(10):
+        q = rng.uniform(dyn.lower, dyn.upper)
+        qd = rng.uniform(-2.0, 2.0, 6)
+        Tp, Tm, T0 = kin.link_poses(q + eps * qd), kin.link_poses(q - eps * qd), \
+            kin.link_poses(q)
+        ke = 0.0
+        for i, b in enumerate(bodies):
+            R, Rp, Rm = T0[i][0, :3, :3], Tp[i][0, :3, :3], Tm[i][0, :3, :3]
+            c = (Tp[i][0, :3, 3] + Rp @ b.lever - Tm[i][0, :3, 3] - Rm @ b.lever) / (2 * eps)
+            W = (Rp - Rm) / (2 * eps) @ R.T
+            w = np.array([W[2, 1], W[0, 2], W[1, 0]])
+            ke += 0.5 * (b.mass * c @ c + w @ R @ np.asarray(b.inertia) @ R.T @ w)
+        M = dyn.mass_matrix(q)
+        assert 0.5 * qd @ M @ qd == pytest.approx(ke, rel=1e-7)
+        assert np.all(np.linalg.eigvalsh(M) > 0)
+
+
 def test_a_payload_on_tool0_loads_the_wrist(model):
     """6 kg 0.1 m out of the flange, forearm horizontal and the tool pointing down
     (q5 = 90 deg): the load hangs 0.6 m ahead of axes 2 and 3 and right below axes 4, 5, 6, so
