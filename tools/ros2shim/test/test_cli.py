@@ -13,6 +13,9 @@ sys.path.insert(0, SRC)
 
 from ros2shim.cli import main  # noqa: E402
 
+# nodes or processes on the ROS graph: run with the ROS tests, one at a time (scripts/test.sh)
+pytestmark = pytest.mark.ros
+
 # Prints its arguments as JSON, then exits with the code in $EXIT_CODE (default 0).
 ECHO_ARGS = ('import json, os, sys\nprint(json.dumps(sys.argv[1:]), flush=True)\n'
              'sys.exit(int(os.environ.get("EXIT_CODE", "0")))\n')

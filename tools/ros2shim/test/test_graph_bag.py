@@ -20,6 +20,9 @@ from ros2shim import fmt  # noqa: E402
 from ros2shim.cli import main  # noqa: E402
 from test_cli import ECHO_ARGS, make_prefix, py  # noqa: E402
 
+# nodes or processes on the ROS graph: run with the ROS tests, one at a time (scripts/test.sh)
+pytestmark = pytest.mark.ros
+
 BOUND_S = 60.0        # generous bound of every subprocess on a loaded 2-core machine
 
 

@@ -14,6 +14,9 @@ from irb_bringup import ctl_core as core
 from irb_bringup.ctl import main
 from irb_control.pd_plus import MODE_HOLD, MODE_IDLE, MODE_PATH, MODE_RAMP, MODE_STOPPED
 
+# nodes or processes on the ROS graph: run with the ROS tests, one at a time (scripts/test.sh)
+pytestmark = pytest.mark.ros
+
 BOUND_S = 60.0
 PERIOD_S = 0.01
 

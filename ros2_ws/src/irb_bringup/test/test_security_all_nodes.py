@@ -7,6 +7,9 @@ import pytest
 
 from irb_description.node_main import SECURITY_REFUSED_EXIT, middleware_security_support
 
+# nodes or processes on the ROS graph: run with the ROS tests, one at a time (scripts/test.sh)
+pytestmark = pytest.mark.ros
+
 NODES = [('irb_control', 'simulator'), ('irb_control', 'pdplus'), ('irb_control', 'axis_bridge'),
          ('irb_control', 'fake_axis_computer'), ('irb_planning', 'planner'),
          ('irb_planning', 'plan'), ('irb_identification', 'recorder'),

@@ -98,6 +98,7 @@ def test_plans_of_any_path_become_profiles(model):
      'blend_radii: [0.01]\n', 'turns back'),
     (None, 'cannot read path file'),
 ])
+@pytest.mark.ros
 def test_pdplus_refuses_a_bad_path_file_with_one_line(tmp_path, text, words):
     import os
     import subprocess

@@ -9,6 +9,9 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 from irb_description import node_main  # noqa: E402
 
+# nodes or processes on the ROS graph: run with the ROS tests, one at a time (scripts/test.sh)
+pytestmark = pytest.mark.ros
+
 NODE = ['-m', 'irb_description.kinematics_server']
 
 
