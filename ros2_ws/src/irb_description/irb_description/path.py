@@ -523,6 +523,12 @@ def path_from_spec(spec: dict) -> PathBase:
     if kind not in known:
         raise ValueError(f'unknown path type {kind!r}; one of {list(PATH_TYPES)}')
     extra = set(spec) - known[kind] - {'type', PROCESS_KEY}
+    if 'orientation' in extra:
+        # read by irb_description.orientation (six axes); the three-axis planner and pdplus
+        # cannot keep a tool orientation, and say so rather than drop the block
+        raise ValueError("an 'orientation' block needs the six-axis chain "
+                         '(irb_description.orientation, doc/six_axis.md); the planner and '
+                         'pdplus drive joints 1-3 with the wrist locked')
     if extra:
         raise ValueError(f'path type {kind!r} takes {sorted(known[kind])}, not {sorted(extra)}')
 

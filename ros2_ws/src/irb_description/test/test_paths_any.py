@@ -159,6 +159,8 @@ def test_spline_passes_the_waypoints_and_is_c2():
     ({'type': 'circle', 'center': [0.6, 0, 0.3], 'radius': 0.1, 'waypoints': []},
      'not'),
     ({'type': 'spline', 'waypoints': [[0.5, 0, 'x'], [0.6, 0, 0.3]]}, 'spline'),
+    ({'type': 'line', 'waypoints': [[0.5, 0, 0.3], [0.7, 0, 0.3]],
+      'orientation': {'law': 'fixed'}}, 'six-axis chain'),
 ])
 def test_bad_specs_say_why(spec, words):
     with pytest.raises(ValueError, match=words):
