@@ -105,6 +105,7 @@ class PowerModes:
                                                  and t.extra_j >= 0)):
                 raise ValueError(f'power modes: transition {t.src} -> {t.dst}: extra_j must '
                                  f'be >= 0 or {BUS_CHARGE!r}, got {t.extra_j!r}')
+        object.__setattr__(self, '_paths', {})     # (a, b) -> neighbour transitions
         for m in MODES[1:]:
             for a, b in ((HOLD, m), (m, HOLD)):
                 if self._path(a, b) is None:
@@ -144,6 +145,15 @@ class PowerModes:
 
     def _path(self, a: str, b: str):
         """Neighbour transitions from a to b, shortest in time (Dijkstra), or None."""
+        cache = self.__dict__.get('_paths')
+        if cache is not None and (a, b) in cache:
+            return cache[(a, b)]
+        path = self._dijkstra(a, b)
+        if cache is not None:
+            cache[(a, b)] = path
+        return path
+
+    def _dijkstra(self, a: str, b: str):
         best = {a: 0.0}
         heap = [(0.0, a, ())]
         while heap:
