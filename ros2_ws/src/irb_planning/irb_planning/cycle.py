@@ -591,7 +591,8 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
     blob = json.dumps({'v': CACHE_VERSION, 'path': op.path, 'process': op.process,
                        'grid': spec.grid_size or s.grid_size, 'map': spec.friction_map,
                        'model': energy_model, 'electrical': repr(planner.electrical),
-                       'delta': s.min_theta_dot_rad_s, 'margin': s.constraint_margin},
+                       'delta': s.min_theta_dot_rad_s, 'margin': s.constraint_margin,
+                       'rate': [s.play_rate_hz, s.evaluation_rate_hz]},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
@@ -599,9 +600,10 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
 def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
                   cache_dir: Path | None = None, progress=print) -> Front:
     """Plan ``op`` time-optimally and energy-optimally at its front durations (cached on disk
-    per request in ``cache_dir``); PlanError codes other than 'infeasible duration' are
-    errors, a refused duration is left out and recorded."""
-    from .request import ERROR_INFEASIBLE_DURATION, PlanError
+    per request in ``cache_dir``). A front duration the planner refuses as infeasible (code
+    3) or fails to solve (code 5) is left out and recorded with its reason; any other
+    refusal, or of the time-optimal plan, is a CycleError."""
+    from .request import ERROR_INFEASIBLE_DURATION, ERROR_SOLVER, PlanError
     bus = energy_model.split('_', 1)[1]
     grid = spec.grid_size
     key = _cache_key(planner, op, spec, energy_model)
@@ -628,8 +630,8 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
             r = planner.plan(plan_request(op, duration, objective, energy_model, grid,
                                           spec.friction_map))
         except PlanError as exc:
-            if exc.code == ERROR_INFEASIBLE_DURATION and objective != 'time':
-                return None, exc.message, time.perf_counter() - t0
+            if exc.code in (ERROR_INFEASIBLE_DURATION, ERROR_SOLVER) and objective != 'time':
+                return None, f'code {exc.code}: {exc.message}', time.perf_counter() - t0
             raise CycleError(f'motion {op.name}: the planner refused the {objective} plan'
                              f'{f" at {duration:g} s" if duration else ""} (code {exc.code}):'
                              f' {exc.message}') from None
@@ -663,6 +665,34 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
 
 
 # --- the whole cycle ----------------------------------------------------------------------
+_WORKER = {}
+
+
+def _front_worker(settings, op, spec, energy_model, cache_dir):
+    """One motion's front in a worker process (its Planner built once per process)."""
+    from .planner import Planner
+    if _WORKER.get('settings') != settings:
+        _WORKER.update(settings=settings, planner=Planner(settings=settings))
+    def say(line):
+        print(line, flush=True)         # the worker shares the caller's stdout
+    return compute_front(_WORKER['planner'], op, spec, energy_model, cache_dir, say)
+
+
+def _fronts_parallel(settings, ms, spec, energy_model, cache_dir, progress, jobs) -> dict:
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    fronts = {}
+    ctx = mp.get_context('forkserver')
+    with ProcessPoolExecutor(max_workers=min(jobs, len(ms)), mp_context=ctx) as pool:
+        futs = {pool.submit(_front_worker, settings, op, spec, energy_model, cache_dir): op
+                for op in ms}
+        for k, fut in enumerate(as_completed(futs)):
+            op = futs[fut]
+            fronts[op.name] = fut.result()
+            progress(f'front {k + 1}/{len(ms)} done: {op.name}')
+    return {op.name: fronts[op.name] for op in ms}
+
+
 def hold_power_at(planner, q) -> float:
     """Hold power [W] at joint position q (the planner's arm) on the planner's electrical
     model: standby + drive idle + copper of the gravity torque."""
@@ -701,6 +731,7 @@ class CyclePlan:
     modes: PowerModes
     plan_time_s: float
     front_time_s: float
+    energy_model: str = ''
 
     def summary(self) -> dict:
         s = self.solution
@@ -757,9 +788,12 @@ def restrict_modes(items: list, modes: tuple) -> list:
 
 
 def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
-               cache_dir=None, progress=print, takt_s: float | None = None) -> CyclePlan:
+               cache_dir=None, progress=print, takt_s: float | None = None,
+               jobs: int = 1) -> CyclePlan:
     """Fronts (planner, cached), stations, the DP optimum with its certificate, baselines
-    A (time-optimal motions, hold) and B (durations by the same DP, hold only)."""
+    A (time-optimal motions, hold) and B (durations by the same DP, hold only). ``jobs`` > 1:
+    the motions' fronts in that many processes (each with its own Planner of the same
+    settings; their progress lines go to stdout as they come)."""
     from irb_description.power_modes import load_power_modes
     from .planner import Planner, PlannerSettings
     t0 = time.perf_counter()
@@ -774,9 +808,14 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
     energy_model = spec.energy_model or f'electrical_{planner.electrical.bus_mode}'
     fronts = {}
     ms = spec.motions
-    for k, op in enumerate(ms):
-        progress(f'front {k + 1}/{len(ms)}: {op.name}')
-        fronts[op.name] = compute_front(planner, op, spec, energy_model, cache_dir, progress)
+    if jobs > 1 and len(ms) > 1:
+        fronts = _fronts_parallel(planner.settings, ms, spec, energy_model, cache_dir,
+                                  progress, jobs)
+    else:
+        for k, op in enumerate(ms):
+            progress(f'front {k + 1}/{len(ms)}: {op.name}')
+            fronts[op.name] = compute_front(planner, op, spec, energy_model, cache_dir,
+                                            progress)
     t_front = time.perf_counter() - t0
     holding = {name: hold_power_at(planner, f.fastest['q_end']) for name, f in fronts.items()}
     items = stations_and_motions(spec, holding)
@@ -788,7 +827,7 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
     except CycleError:
         base_b = None
     return CyclePlan(spec, sol, base_a, base_b, fronts, items, modes,
-                     time.perf_counter() - t0, t_front)
+                     time.perf_counter() - t0, t_front, energy_model)
 
 
 def resolve_at_takt(plan: CyclePlan, takt_s: float, modes: PowerModes | None = None
@@ -801,3 +840,38 @@ def resolve_at_takt(plan: CyclePlan, takt_s: float, modes: PowerModes | None = N
     dp = dp_items(plan.items, plan.fronts)
     return (solve(dp, takt_s, spec.time_step_s, pm), baseline_a(plan.fronts, plan.items, spec, pm),
             solve(restrict_modes(dp, (HOLD,)), takt_s, spec.time_step_s, pm))
+
+
+def timeline(choices: list, fronts: dict, pm: PowerModes) -> tuple[np.ndarray, np.ndarray]:
+    """Power [W] over one cycle of ``choices`` (a Solution's or baseline A's): motions as
+    planned (the front point's played power, or the time-optimal plan's), stations as their
+    transitions (mean power of each neighbour step) and mode."""
+    ts, ps, t0 = [], [], 0.0
+    for c in choices:
+        if c['kind'] == 'motion':
+            f = fronts[c['name']]
+            rec = f.points.get(c['duration_s']) or f.fastest
+            t = np.asarray(rec['power_t'], float)
+            ts.append(t0 + t - t[0])
+            ps.append(np.asarray(rec['power_w'], float))
+            t0 += c['duration_s']
+            continue
+        hp, mode, d = c['holding_power_w'], c['mode'], c['duration_s']
+        segs = []
+        if mode != HOLD:
+            t_in = pm.transition(HOLD, mode, hp)
+            t_out = pm.transition(mode, HOLD, hp)
+            steps_in = [pm.transition(x, y, hp) for x, y in zip(t_in.path, t_in.path[1:])]
+            steps_out = [pm.transition(x, y, hp) for x, y in zip(t_out.path, t_out.path[1:])]
+            rest = d - t_in.duration_s - t_out.duration_s
+            segs = ([(s.duration_s, s.energy_j / s.duration_s if s.duration_s else 0.0)
+                     for s in steps_in] + [(rest, pm.power_w(mode))]
+                    + [(s.duration_s, s.energy_j / s.duration_s if s.duration_s else 0.0)
+                       for s in steps_out])
+        else:
+            segs = [(d, pm.power_w(HOLD, hp))]
+        for dur, p in segs:
+            ts.append(np.array([t0, t0 + dur]))
+            ps.append(np.array([p, p]))
+            t0 += dur
+    return np.concatenate(ts), np.concatenate(ps)

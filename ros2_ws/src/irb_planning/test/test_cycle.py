@@ -196,3 +196,43 @@ def test_the_installed_gluing_cycle_parses():
                                                    'motion']
     assert spec.motions[0].process['tcp_speed_min'] == 0.09
     check_continuity(spec)
+
+
+def test_cli_end_to_end_with_the_planner(tmp_path, capsys):
+    """A small circle, a fixed step and a wait through the real planner (grid 30, the
+    time-optimal plan and one front point): the JSON adds up, the hold power is the electrical model at the pose's gravity
+    torque, the plan beats baseline A, and a second run at another takt plans nothing."""
+    import json
+    from irb_description.electrical import load_electrical
+    from irb_description.model import RobotModel
+    from irb_planning.cycle_cli import main
+    cyc = {'takt_s': 12.0, 'grid_size': 30,
+           'operations': [{'motion': 'loop', 'path': {'type': 'circle', 'center': [0.6, 0, 0.3],
+                                                      'radius': 0.05}, 'durations_s': [1.0]},
+                          {'fixed': 'load', 'duration_s': 4.0},
+                          {'wait': 'idle'}]}
+    f = tmp_path / 'c.yaml'
+    f.write_text(yaml.safe_dump(cyc))
+    out = tmp_path / 'out'
+    assert main(['--cycle', str(f), '--out', str(out), '--no-plots']) == 0
+    first = capsys.readouterr().out
+    assert ': time-optimal' in first and 'certificate' in first
+    res = json.loads((out / 'cycle_plan.json').read_text())
+    ops = res['operations']
+    assert sum(o['energy_j'] for o in ops) == pytest.approx(res['energy_j'])
+    assert sum(o['duration_s'] for o in ops) == pytest.approx(12.0)
+    assert res['gap_j'] >= -1e-9 and res['energy_j'] <= res['baseline_a_j']
+    st = [o for o in ops if o['kind'] == 'station'][0]
+    assert st['members'] == ['load', 'idle']
+    m = RobotModel.load()
+    q_end = json.loads((out / 'motions' / 'loop.plan.json').read_text())['trajectory']['q'][-1]
+    e = load_electrical().axes(3)
+    hp = float(e.power(m.gravity(np.array(q_end)), np.zeros(3)))
+    assert st['holding_power_w'] == pytest.approx(hp, rel=1e-9)
+    assert (out / 'motions' / 'loop.path.yaml').is_file()
+    assert main(['--cycle', str(f), '--out', str(out), '--no-plots', '--takt', '15']) == 0
+    second = capsys.readouterr().out
+    assert ': time-optimal' not in second and ' -> ' not in second   # all from the cache
+    assert json.loads((out / 'cycle_plan.json').read_text())['takt_s'] == 15.0
+    assert main(['--cycle', str(f), '--out', str(out), '--takt', '3']) == 1
+    assert 'longer than the takt' in capsys.readouterr().err
