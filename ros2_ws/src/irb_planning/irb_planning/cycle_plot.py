@@ -19,12 +19,15 @@ def plot_timeline(plan, path: Path) -> Path:
     from .cycle import timeline
     plt = _plt()
     fig, ax = plt.subplots(figsize=(10, 4.2))
+    top = 0.0
     for choices, label, style in ((plan.baseline_a['choices'], 'baseline A: fastest motions, '
                                    f'motors hold ({plan.baseline_a["total_j"]:.0f} J)', 'C3'),
                                   (plan.solution.choices, 'planned: durations and modes '
                                    f'({plan.solution.total_j:.0f} J)', 'C0')):
         t, p = timeline(choices, plan.fronts, plan.modes)
-        ax.plot(t, p, color=style, lw=1.4, label=label)
+        ax.plot(t, p, color=style, lw=1.4, label=label + (
+            f', peak {p.max():.0f} W' if p.max() > 1500 else ''))
+        top = max(top, float(np.percentile(p, 97)))
     t0 = 0.0
     for k, c in enumerate(plan.solution.choices):
         d = c['duration_s']
@@ -34,7 +37,7 @@ def plot_timeline(plan, path: Path) -> Path:
                 ha='center', va='bottom', fontsize=7, transform=ax.get_xaxis_transform())
         t0 += d
     ax.set_xlim(0, plan.solution.takt_s)
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, max(1.6 * top, 400.0))      # short peaks of fast motions clipped
     ax.set_xlabel('time in the cycle [s]')
     ax.set_ylabel('electrical power [W]')
     ax.set_title(f'one cycle, takt {plan.solution.takt_s:g} s')
