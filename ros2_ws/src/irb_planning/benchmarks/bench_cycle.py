@@ -10,7 +10,8 @@ Sections (all by default; ``--section`` to pick):
   tornado  the saving's sensitivity to each mode parameter over a plausible range;
   ten      a cycle of 10 operations (benchmarks/cycle_ten.yaml): wall time of the planning,
            cold (empty front cache, --jobs processes) and warm (fronts cached), with the load.
-Prints JSON and writes results/cycle.json; PNGs to results/ (cycle_*.png).
+Prints JSON and writes results/cycle.json (sections not run keep their last results); PNGs
+to results/ (cycle_*.png).
 
     python ros2_ws/src/irb_planning/benchmarks/bench_cycle.py [--cache DIR] [--jobs 2]
 """
@@ -342,6 +343,17 @@ def main(argv=None):
     if 'ten' in a.section:
         result['ten'] = section_ten(cache, a.jobs, not a.no_cold)
     result['load_end'] = load_text()
+    old = RESULTS / 'cycle.json'          # keep the sections not run this time
+    if old.is_file():
+        import json
+        kept = json.loads(old.read_text())
+        for sec in SECTIONS:
+            if sec not in a.section and sec in kept:
+                result[sec] = kept[sec]
+                if sec == 'ten':
+                    result['ten_load'] = kept.get('ten_load')
+    if 'ten' in a.section:
+        result['ten_load'] = [result['load_start'], result['load_end']]
     dump('cycle', result)
     return 0
 
