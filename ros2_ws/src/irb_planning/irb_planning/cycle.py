@@ -686,10 +686,14 @@ def _fronts_parallel(settings, ms, spec, energy_model, cache_dir, progress, jobs
     with ProcessPoolExecutor(max_workers=min(jobs, len(ms)), mp_context=ctx) as pool:
         futs = {pool.submit(_front_worker, settings, op, spec, energy_model, cache_dir): op
                 for op in ms}
-        for k, fut in enumerate(as_completed(futs)):
-            op = futs[fut]
-            fronts[op.name] = fut.result()
-            progress(f'front {k + 1}/{len(ms)} done: {op.name}')
+        try:
+            for k, fut in enumerate(as_completed(futs)):
+                op = futs[fut]
+                fronts[op.name] = fut.result()
+                progress(f'front {k + 1}/{len(ms)} done: {op.name}')
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
     return {op.name: fronts[op.name] for op in ms}
 
 
@@ -716,6 +720,18 @@ def check_continuity(spec: CycleSpec, tol_m: float = 1e-3) -> None:
                              f'{np.round(b, 4).tolist()} m but the robot is at '
                              f'{np.round(a, 4).tolist()} m after {prev.name} (more than '
                              f'{tol_m * 1e3:g} mm apart)')
+
+
+def check_reachable(spec: CycleSpec, model) -> None:
+    """Every motion's path inside the workspace and the joint limits (the planner's own
+    along-path check, before any plan); CycleError naming the motion otherwise."""
+    from irb_description.path import check_joint_path, path_from_spec
+    for op in spec.motions:
+        try:
+            check_joint_path(model, path_from_spec(op.path))
+        except ValueError as exc:
+            raise CycleError(f'{spec.source}: motion {op.name}: path unreachable: '
+                             f'{str(exc).splitlines()[0]}') from None
 
 
 @dataclass
@@ -803,6 +819,7 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
     check_continuity(spec)
     if planner is None:
         planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200))
+    check_reachable(spec, planner.model)
     if modes is None:
         modes = load_power_modes(spec.power_modes or None, electrical=planner.electrical)
     energy_model = spec.energy_model or f'electrical_{planner.electrical.bus_mode}'

@@ -200,8 +200,9 @@ def test_the_installed_gluing_cycle_parses():
 
 def test_cli_end_to_end_with_the_planner(tmp_path, capsys):
     """A small circle, a fixed step and a wait through the real planner (grid 30, the
-    time-optimal plan and one front point): the JSON adds up, the hold power is the electrical model at the pose's gravity
-    torque, the plan beats baseline A, and a second run at another takt plans nothing."""
+    time-optimal plan and one front point): the JSON adds up, the hold power is the
+    electrical model at the pose's gravity torque, the plan beats baseline A, and a second
+    run at another takt plans nothing."""
     import json
     from irb_description.electrical import load_electrical
     from irb_description.model import RobotModel
@@ -236,3 +237,21 @@ def test_cli_end_to_end_with_the_planner(tmp_path, capsys):
     assert json.loads((out / 'cycle_plan.json').read_text())['takt_s'] == 15.0
     assert main(['--cycle', str(f), '--out', str(out), '--takt', '3']) == 1
     assert 'longer than the takt' in capsys.readouterr().err
+
+
+def test_unreachable_and_broken_chains_are_refused_before_planning():
+    from irb_description.model import RobotModel
+    from irb_planning.cycle import check_continuity, check_reachable
+    far = parse_cycle({'takt_s': 20, 'operations': [
+        {'motion': 'out', 'path': {'type': 'line', 'waypoints': [[0.6, 0, 0.3], [2.5, 0, 0.3]]}},
+        {'motion': 'in', 'path': {'type': 'line',
+                                  'waypoints': [[2.5, 0, 0.3], [0.6, 0, 0.3]]}}]})
+    with pytest.raises(CycleError, match='motion out: path unreachable') as err:
+        check_reachable(far, RobotModel.load())
+    assert '\n' not in str(err.value)
+    gap = parse_cycle({'takt_s': 20, 'operations': [
+        {'motion': 'a', 'path': {'type': 'line', 'waypoints': [[0.6, 0, 0.3], [0.6, 0.1, 0.3]]}},
+        {'motion': 'b', 'path': {'type': 'line',
+                                 'waypoints': [[0.6, 0.1, 0.31], [0.6, 0, 0.3]]}}]})
+    with pytest.raises(CycleError, match='motion b starts at'):
+        check_continuity(gap)
