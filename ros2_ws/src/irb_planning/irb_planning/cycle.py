@@ -598,11 +598,13 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
 
 
 def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
-                  cache_dir: Path | None = None, progress=print) -> Front:
+                  cache_dir: Path | None = None, progress=print, cached_only: bool = False
+                  ) -> Front | None:
     """Plan ``op`` time-optimally and energy-optimally at its front durations (cached on disk
     per request in ``cache_dir``). A front duration the planner refuses as infeasible (code
     3) or fails to solve (code 5) is left out and recorded with its reason; any other
-    refusal, or of the time-optimal plan, is a CycleError."""
+    refusal, or of the time-optimal plan, is a CycleError. ``cached_only``: None instead of
+    planning when the cache lacks a plan."""
     from .request import ERROR_INFEASIBLE_DURATION, ERROR_SOLVER, PlanError
     bus = energy_model.split('_', 1)[1]
     grid = spec.grid_size
@@ -636,6 +638,13 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
                              f'{f" at {duration:g} s" if duration else ""} (code {exc.code}):'
                              f' {exc.message}') from None
         return _point_record(r, bus, planner.electrical), '', time.perf_counter() - t0
+    if cached_only:
+        if 'fastest' not in cache:
+            return None
+        todo = [d for d in front_durations(cache['fastest']['min_duration_s'], op, spec)
+                if f'{d:.9g}' not in cache['points'] and f'{d:.9g}' not in cache['refused']]
+        if todo:
+            return None
     if 'fastest' not in cache:
         rec, _, dt = run(0.0, 'time')
         cache['fastest'] = rec
@@ -826,8 +835,13 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
     fronts = {}
     ms = spec.motions
     if jobs > 1 and len(ms) > 1:
-        fronts = _fronts_parallel(planner.settings, ms, spec, energy_model, cache_dir,
-                                  progress, jobs)
+        cached = {op.name: compute_front(planner, op, spec, energy_model, cache_dir,
+                                         progress, cached_only=True) for op in ms}
+        todo = [op for op in ms if cached[op.name] is None]
+        if todo:
+            cached.update(_fronts_parallel(planner.settings, todo, spec, energy_model,
+                                           cache_dir, progress, jobs))
+        fronts = {op.name: cached[op.name] for op in ms}
     else:
         for k, op in enumerate(ms):
             progress(f'front {k + 1}/{len(ms)}: {op.name}')
