@@ -26,6 +26,7 @@ setup(
             'planner = irb_planning.planner_node:main',
             'plan = irb_planning.plan_cli:main',
             'place = irb_planning.place_cli:main',
+            'cycle = irb_planning.cycle_cli:main',
         ],
     },
 )
