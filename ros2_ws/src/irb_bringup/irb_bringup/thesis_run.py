@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-PHASES = 7
+PHASES = 8
 
 
 class Lines:
@@ -396,9 +396,26 @@ def main(args=None) -> int:
         log(f'   phase 6: {placement["phase_wall_time_s"]:.0f} s')
 
         # 7 ---------------------------------------------------------------------------------
-        log(f'7/{PHASES} report')
+        cycle = None
+        cc = cfg.get('cycle') or {}
+        if cc.get('enabled', False):
+            from .cycle_phase import run_cycle_phase
+            t_phase = time.monotonic()
+            log(f'7/{PHASES} work cycle: motion durations and power modes within the takt '
+                '(irb_planning cycle, in process, electrical model)')
+            cycle = run_cycle_phase(cc, cfg['rectangle'], cfg['duty_cycle'], out / 'cycle', log)
+            st = cycle['study']
+            log(f'   {st["energy_j"]:.1f} J per cycle at takt {st["takt_s"]:g} s against '
+                f'{st["baseline_a_j"]:.1f} J (A) and {st["baseline_b_j"]:.1f} J (B): '
+                f'{st["saving_vs_a_percent"]:.1f} % less than A; phase 7: '
+                f'{time.monotonic() - t_phase:.0f} s')
+        else:
+            log(f'7/{PHASES} work cycle: off in this configuration (cycle.enabled)')
+
+        # 8 ---------------------------------------------------------------------------------
+        log(f'8/{PHASES} report')
         write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags,
-                     time.monotonic() - t_start, rect_file, placement, plant_el)
+                     time.monotonic() - t_start, rect_file, placement, plant_el, cycle)
         log(f'done in {time.monotonic() - t_start:.0f} s: {out / "report.md"}')
         return 0
     except KeyboardInterrupt:
@@ -491,9 +508,10 @@ def write_rectangle(rect: dict, out: Path) -> Path:
 
 
 def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags, elapsed,
-                 rect_file=None, placement=None, plant_el=None):
+                 rect_file=None, placement=None, plant_el=None, cycle=None):
     """Figures from the bags, plots, report.md and summary.json; ``placement``: phase 6's
-    block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML."""
+    block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML,
+    ``cycle``: phase 7's work-cycle study (cycle_phase.run_cycle_phase) or None."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
     from irb_description.path import CirclePath, load_path_file, path_spec
@@ -562,6 +580,9 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     paths = {k: (rect if k.startswith('rect_') else CirclePath(
         np.asarray(centers.get(k) if centers.get(k) is not None else center, float), radius,
         0.0, 1)) for k in executed}
+    if cycle is not None:
+        from .cycle_phase import cycle_section
+        sections += cycle_section(cycle, out)
     sections += per_run_reports(out, executed, plans, paths)
     markdown_report(run_id, figs['energy_ff'], figs['trapezoid_ff'], figs['energy_noff'],
                     plots, rows, sorted(str(p) for p in (out / 'friction').glob('*.png')),
@@ -586,6 +607,13 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
                               planned_tcp_speed_peak_m_s=plans[k].tcp_speed_peak,
                               planned_tcp_accel_peak_m_s2=plans[k].tcp_accel_peak)
     summary.update({k: v for k, v in energy_summary.items() if k != 'log'})
+    if cycle is not None:
+        st = cycle['study']
+        summary['work_cycle'] = {k: st[k] for k in (
+            'takt_s', 'energy_j', 'baseline_a_j', 'baseline_b_j', 'saving_vs_a_percent',
+            'saving_vs_b_percent', 'goal_met', 'lower_bound_j', 'gap_percent', 'per_year',
+            'parameter_for_goal', 'ceiling_all_rest_in_bus_off_percent')}
+        summary['work_cycle']['plan_json'] = cycle['plan_json']
     summary['elapsed_s'] = elapsed
     (out / 'summary.json').write_text(json.dumps(summary, indent=2))
     for k in ('energy_saving_percent', 'path_error_reduction_percent',

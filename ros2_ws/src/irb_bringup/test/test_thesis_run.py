@@ -120,6 +120,30 @@ def test_the_configured_energy_story(section):
     check_duty(cfg['duty_cycle'], float(cfg['circle_duration_s']))
 
 
+def test_the_work_cycle_glues_the_jobs_rectangle():
+    """Phase 7 plans irb_planning's gluing cycle, whose first motion repeats the rectangle
+    of this config as a path mapping: it must be the contour the job runs (corners, blends,
+    band), and a cycle that glues another contour is refused with one line."""
+    from dataclasses import replace
+
+    import yaml
+    from irb_bringup.cycle_phase import cycle_file, glue_matches_rectangle
+    from irb_planning.cycle import load_cycle
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config'
+                          / 'thesis_run.yaml').read_text())['full']
+    assert cfg['cycle']['enabled']
+    spec = load_cycle(cycle_file(cfg['cycle']))
+    assert glue_matches_rectangle(spec, cfg['rectangle']) == ''
+    moved = dict(cfg['rectangle'], center_m=[0.7, 0.01, 0.3])
+    assert 'other corners' in glue_matches_rectangle(spec, moved)
+    wider = dict(cfg['rectangle'], tcp_speed_max_m_s=0.16)
+    assert 'process band' in glue_matches_rectangle(spec, wider)
+    other = replace(spec, operations=[replace(spec.operations[0], path={
+        'type': 'line', 'waypoints': [[0.5, 0.0, 0.3], [0.7, 0.0, 0.3]]}),
+        *spec.operations[1:]])
+    assert 'not the rectangle' in glue_matches_rectangle(other, cfg['rectangle'])
+
+
 def test_gap_in_a_recorded_path_phase_is_refused():
     """A lap whose end the recorder lost (stall longer than the writers' history) must not be
     measured: the gap check names it."""
