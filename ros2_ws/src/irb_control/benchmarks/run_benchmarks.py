@@ -103,7 +103,7 @@ def _loop_run(duration: float, rt_priority: int) -> dict:
     tag = f'_rt{rt_priority}' if rt_priority else ''
     logs = {n: open(RESULTS / f'loop_{n}{tag}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
-                             '-p', 'profile_duration_s:=10.0'],
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=true'],
                             stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
                             '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}'],

@@ -90,9 +90,10 @@ SPEC = NodeSpec(
               "line, arc, polyline, spline, circle); '' = the circle of the path_* parameters. "
               'The path of the built-in profile and of plans that carry no path of their '
               'own (a plan from the planner carries its path)'),
-        Param('auto_enable', True, '', 'at start-up only: start moving once a profile '
-              'exists, the joint states have been steady for auto_enable_settle_s and '
-              'torque_command has a subscriber (once; later motions need ~/enable)'),
+        Param('auto_enable', False, '', 'off: nothing moves until ~/enable. On: at start-up '
+              'only, start moving once a profile exists, the joint states have been steady '
+              'for auto_enable_settle_s and torque_command has a subscriber (once; later '
+              'motions need ~/enable)'),
         Param('auto_enable_settle_s', 0.25, 's', 'auto_enable: joint states without a gap of '
               'more than 3 periods for this long first, and torque_command subscribed for '
               'this long (real time only; 0 with use_sim_time)'),
@@ -135,9 +136,8 @@ SPEC = NodeSpec(
     services=(Topic('~/enable', 'std_srvs/Trigger', 'start: ramp to the (pending) profile; '
                     'clears a latched stop'),
               Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop')),
-    example='ros2 run irb_control pdplus\n'
-            'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none '
-            '-p auto_enable:=false')
+    example='ros2 run irb_control pdplus    # then: ros2 run irb_bringup ctl enable\n'
+            'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none')
 
 
 class PdPlusNode(Node):

@@ -30,8 +30,9 @@ def graph():
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
     ns = f'/t{uuid.uuid4().hex[:8]}'
+    # these tests start the built-in circle with the start-up auto_enable (off by default)
     ctrl = PdPlusNode(context=ctx, namespace=ns, parameter_overrides=[
-        Parameter('executor', value='single')])
+        Parameter('executor', value='single'), Parameter('auto_enable', value=True)])
     peer = rclpy.create_node('peer', namespace=ns, context=ctx)
     axis_ok(peer, ns)
     ex = SingleThreadedExecutor(context=ctx)
