@@ -135,7 +135,10 @@ SPEC = NodeSpec(
               '(latched), by its stamp')),
     services=(Topic('~/enable', 'std_srvs/Trigger', 'start: ramp to the (pending) profile; '
                     'clears a latched stop'),
-              Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop')),
+              Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop'),
+              Topic('~/hold', 'std_srvs/Trigger', 'controlled stop: a motion decelerates '
+                    'along its own path/profile, then holds the pose, motors on (HOLD, no '
+                    'latched error); refused while idle or stopped')),
     example='ros2 run irb_control pdplus    # then: ros2 run irb_bringup ctl enable\n'
             'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none')
 
@@ -143,7 +146,7 @@ SPEC = NodeSpec(
 class PdPlusNode(Node):
     """Subscribes /joint_states and /planned_trajectory; publishes /torque_command
     (sensor_msgs/JointState, effort [N m], stamp = the answered state's stamp) and
-    /controller_state; services ~/enable and ~/stop (std_srvs/Trigger)."""
+    /controller_state; services ~/enable, ~/stop and ~/hold (std_srvs/Trigger)."""
 
     def __init__(self, **kwargs):
         super().__init__('pdplus', **kwargs)
@@ -198,6 +201,7 @@ class PdPlusNode(Node):
         self.plans_accepted = self.plans_refused = 0
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
+        self.create_service(Trigger, '~/hold', self.on_hold)
         self._names = list(self.model.joint_names)
         self._last_q = None                     # the last measured pose (ramp check)
         self._name_key: tuple | None = None     # names of the last joint state ...
@@ -528,6 +532,20 @@ class PdPlusNode(Node):
         self._publish_stopped()
         response.success, response.message = True, 'stopped (latched until enable)'
         self.log.warn('stop service: safe stop latched')
+        return response
+
+    def on_hold(self, request, response):
+        """Controlled stop (PdPlusController.hold): the step decelerates the reference along
+        itself and then holds; a latched stop is never cleared by it."""
+        self._auto_enable_pending = False
+        with self._lock:
+            mode = self.ctrl.mode
+            response.success, response.message = self.ctrl.hold()
+        text = f'hold ({MODE_NAMES[mode]}): {response.message}'
+        if response.success:
+            self.log.info(text)
+        else:
+            self.log.warn(text)
         return response
 
     def destroy_node(self):

@@ -536,3 +536,51 @@ def test_enable_is_refused_while_the_drives_report_an_error(timed):
     _until(ex, lambda: ctrl.axis is not None and ctrl.axis.error)
     resp = ctrl.on_enable(Trigger.Request(), Trigger.Response())
     assert not resp.success and 'reset it first' in resp.message
+
+
+def _call(ex, client):
+    """Call a Trigger service through the executor (a future, bounded)."""
+    assert client.wait_for_service(timeout_sec=TIMEOUT)
+    return spin_for(ex, client.call_async(Trigger.Request()))
+
+
+def test_hold_service_stops_along_the_profile_and_holds(timed):
+    """~/hold (issue 32): refused while idle; from a motion a controlled stop (no latched
+    error) into HOLD with the motors on; refused while stopped, and the stop stays latched."""
+    ctrl, peer, ex, ns = timed
+    ctrl.watchdog.timeout_s = 0.5      # the test steps a plant in Python between samples
+    from irb_control.closed_loop import build_default
+    plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
+    plant.reset(ctrl.ctrl.start_pose())
+    hold = peer.create_client(Trigger, f'{ns}/pdplus/hold')
+    r = _call(ex, hold)
+    assert not r.success and r.message.startswith('idle')
+    _until(ex, lambda: ctrl.axis is not None)
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode != ControllerState.MODE_TIME:
+        states = _drive(ctrl, None, 10, plant)
+    states = _drive(ctrl, None, 40, plant)                # 0.16 s into the motion
+    assert states[-1].mode == ControllerState.MODE_TIME
+    assert np.max(np.abs(states[-1].qd_ref)) > 0.1
+    r = _call(ex, hold)
+    assert r.success and 'decelerating in' in r.message, r.message
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode == ControllerState.MODE_TIME:
+        states += _drive(ctrl, None, 10, plant)
+    assert states[-1].mode == ControllerState.MODE_HOLD, states[-1].stop_reason
+    held = np.array(states[-1].q_ref)
+    after = _drive(ctrl, None, 100, plant)               # 0.4 s held, motors on
+    assert {s.mode for s in after} == {ControllerState.MODE_HOLD}
+    assert all(np.array_equal(s.q_ref, held) for s in after) and not ctrl.ctrl.stop_reason
+    assert np.abs(plant.state.q - held).max() < 2e-3
+    # the sine had not ended: it stopped short of its end pose, on its way
+    assert np.abs(held - ctrl.ctrl.active.q[-1]).max() > 1e-3
+    r = _call(ex, hold)
+    assert r.success and r.message == 'already holding'
+    ctrl.on_stop(Trigger.Request(), Trigger.Response())
+    r = _call(ex, hold)
+    assert not r.success and 'latched' in r.message
+    states = _drive(ctrl, held, 20)
+    assert {s.mode for s in states} == {ControllerState.MODE_STOPPED}
+    assert states[-1].stop_reason == 'stop service' and not ctrl.pub_cmd.sent
