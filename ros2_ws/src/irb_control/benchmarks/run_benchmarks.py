@@ -338,6 +338,8 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
         dur = [1e3 * m.step_duration for t, m in steps if a <= t <= b]
         modes = sorted({int(m.mode) for t, m in steps if a <= t <= b})
         return {'kind': kind, 'states': len(ss), 'unanswered': unanswered, 'modes': modes,
+                # when in the window [s from its start] each unanswered state went out
+                'unanswered_at_s': [round(t - a, 4) for t, lat in ss if lat is None][:20],
                 'latency_ms_p50': float(np.median(lat)) if lat else None,
                 'latency_ms_max': float(max(lat)) if lat else None,
                 'pdplus_step_ms_max': float(max(dur)) if dur else None}

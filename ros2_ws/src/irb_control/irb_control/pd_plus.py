@@ -76,7 +76,10 @@ EV_PLAN = 'plan'              # a validated plan is offered
 EV_RAMP_DONE = 'ramp_done'    # the ramp reached the start of the profile
 EV_MOTION_DONE = 'motion_done'  # the profile ended
 EV_HOLD = 'hold'              # operator: controlled stop along the reference, then hold
-EVENTS = (EV_ENABLE, EV_STOP, EV_PLAN, EV_RAMP_DONE, EV_MOTION_DONE, EV_HOLD)
+EV_MOTORS_OFF = 'motors_off'  # the drives engaged their brakes on request (a deeper mode)
+EV_MOTORS_ON = 'motors_on'    # the drives are back in hold: hold the pose they stand at
+EVENTS = (EV_ENABLE, EV_STOP, EV_PLAN, EV_RAMP_DONE, EV_MOTION_DONE, EV_HOLD, EV_MOTORS_OFF,
+          EV_MOTORS_ON)
 _ARRIVE = 'PATH or TIME'      # the profile's own mode (theta- or time-driven)
 
 #: (state, event) -> (next state, or None = refused and nothing changes; why)
@@ -121,6 +124,20 @@ TRANSITIONS = {
     (MODE_HOLD, EV_HOLD): (MODE_HOLD, 'already holding'),
     (MODE_STOPPED, EV_HOLD): (None, 'stopped (latched): a hold never clears a stop; enable '
                                     'clears it'),
+    # power modes: brakes only at rest (idle, or holding and measured at rest); back on, the
+    # pose the brakes hold is held by the motors (the gravity torque acts before release)
+    (MODE_IDLE, EV_MOTORS_OFF): (MODE_IDLE, 'motors off on the brakes'),
+    (MODE_RAMP, EV_MOTORS_OFF): (None, 'moving (ramp): brakes only at rest; hold first'),
+    (MODE_PATH, EV_MOTORS_OFF): (None, 'moving (path): brakes only at rest; hold first'),
+    (MODE_TIME, EV_MOTORS_OFF): (None, 'moving (time): brakes only at rest; hold first'),
+    (MODE_HOLD, EV_MOTORS_OFF): (MODE_IDLE, 'motors off on the brakes (from hold)'),
+    (MODE_STOPPED, EV_MOTORS_OFF): (MODE_STOPPED, 'stopped: the brakes are engaged already'),
+    (MODE_IDLE, EV_MOTORS_ON): (MODE_HOLD, 'motors on: hold the pose the brakes held'),
+    (MODE_RAMP, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_PATH, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_TIME, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_HOLD, EV_MOTORS_ON): (MODE_HOLD, 'already holding'),
+    (MODE_STOPPED, EV_MOTORS_ON): (None, 'stopped (latched): enable clears it'),
 }
 
 
@@ -470,6 +487,36 @@ class PdPlusController:
                                  1.5 * np.max(np.abs(self._last_qd_ref) / a)))
         return True, f'{why}: decelerating in {self._halt_T:.2f} s'
 
+    def motors_off(self, qd: np.ndarray, rest_speed: float = 0.01) -> tuple[bool, str]:
+        """The drives are to engage their brakes (a deeper power mode): only at rest -- idle,
+        or holding with every measured |qd| (3,) [rad/s] below ``rest_speed`` -- then IDLE
+        (no command, no stop reason). (ok, why)"""
+        nxt, why = self._transition(EV_MOTORS_OFF)
+        if nxt is None:
+            return False, why
+        if self.mode == MODE_HOLD and np.max(np.abs(qd)) >= rest_speed:
+            return False, (f'not at rest (|qd| = {np.abs(qd).round(4).tolist()} rad/s >= '
+                           f'{rest_speed}): brakes only at rest')
+        if self.mode != MODE_STOPPED:
+            self.mode = MODE_IDLE
+            self._enable_requested = False
+            self._halt_T = self._halt = None
+            self._prev_tau = None
+            self._in_flight.clear()
+        return True, why
+
+    def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
+        """The drives are back in hold: HOLD the measured pose q (3,) [rad] (the commands
+        carry its gravity torque from the first one on, before the brakes open)."""
+        nxt, why = self._transition(EV_MOTORS_ON)
+        if nxt is None or self.mode == MODE_HOLD:
+            return nxt is not None, why
+        self.mode = MODE_HOLD
+        self._hold = np.asarray(q, float).tolist()
+        self._prev_tau = None
+        self._in_flight.clear()
+        return True, why
+
     @property
     def stopping(self) -> bool:
         """A hold was requested and the motion is decelerating towards it."""
@@ -564,7 +611,7 @@ class PdPlusController:
             if tau >= prof.duration:
                 self.mode = self._transition(EV_MOTION_DONE)[0]
                 self._hold = prof.q[-1].tolist()
-        elif self.mode == MODE_HOLD and time_driven:
+        elif self.mode == MODE_HOLD and (time_driven or prof is None):
             q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
         else:   # PATH or HOLD on a theta-profile
             raw = self._theta_of(q)
