@@ -487,16 +487,19 @@ class PdPlusController:
                                  1.5 * np.max(np.abs(self._last_qd_ref) / a)))
         return True, f'{why}: decelerating in {self._halt_T:.2f} s'
 
-    def motors_off(self, qd: np.ndarray, rest_speed: float = 0.01) -> tuple[bool, str]:
+    def motors_off(self, qd: np.ndarray, rest_speed: float = 0.01,
+                   dry_run: bool = False) -> tuple[bool, str]:
         """The drives are to engage their brakes (a deeper power mode): only at rest -- idle,
         or holding with every measured |qd| (3,) [rad/s] below ``rest_speed`` -- then IDLE
-        (no command, no stop reason). (ok, why)"""
+        (no command, no stop reason); ``dry_run``: only whether it may. (ok, why)"""
         nxt, why = self._transition(EV_MOTORS_OFF)
         if nxt is None:
             return False, why
         if self.mode == MODE_HOLD and np.max(np.abs(qd)) >= rest_speed:
             return False, (f'not at rest (|qd| = {np.abs(qd).round(4).tolist()} rad/s >= '
                            f'{rest_speed}): brakes only at rest')
+        if dry_run:
+            return True, why
         if self.mode != MODE_STOPPED:
             self.mode = MODE_IDLE
             self._enable_requested = False

@@ -37,6 +37,7 @@ from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_swit
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
+from .plant import POWER_MODES
 from .profiles import ProfileError, TimeTrajectory, default_circle_profile, sine_trajectory
 
 
@@ -138,7 +139,17 @@ SPEC = NodeSpec(
               Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop'),
               Topic('~/hold', 'std_srvs/Trigger', 'controlled stop: a motion decelerates '
                     'along its own path/profile, then holds the pose, motors on (HOLD, no '
-                    'latched error); refused while idle or stopped')),
+                    'latched error); refused while idle or stopped'),
+              Topic('~/power_brakes', 'std_srvs/Trigger', 'power mode: brakes engaged, '
+                    'motors off (only at rest: idle, or holding still); the drive\'s '
+                    '<source>/power_brakes does it'),
+              Topic('~/power_bus_off', 'std_srvs/Trigger', 'power mode: brakes, DC bus off '
+                    '(at rest)'),
+              Topic('~/power_hibernate', 'std_srvs/Trigger', 'power mode: hibernate (at '
+                    'rest)'),
+              Topic('~/power_hold', 'std_srvs/Trigger', 'power mode hold: drives on, the '
+                    'pose the brakes held is held by the motors (its gravity torque acts '
+                    'before the brakes open); enable is refused until then')),
     example='ros2 run irb_control pdplus    # then: ros2 run irb_bringup ctl enable\n'
             'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none')
 
@@ -202,8 +213,16 @@ class PdPlusNode(Node):
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
         self.create_service(Trigger, '~/hold', self.on_hold)
+        # power modes: pdplus asks the drive (simulator or bridge: <axis_status.source>/
+        # power_<mode>) and follows it; None = never asked (the drive's own default)
+        self.drive_mode: str | None = None
+        self._drive_clients: dict = {}
+        for mode in POWER_MODES:
+            self.create_service(Trigger, f'~/power_{mode}',
+                                lambda req, resp, mode=mode: self.on_power_mode(mode, resp))
         self._names = list(self.model.joint_names)
         self._last_q = None                     # the last measured pose (ramp check)
+        self._last_qd = None                    # ... and speed (brakes only at rest)
         self._name_key: tuple | None = None     # names of the last joint state ...
         self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
@@ -279,14 +298,14 @@ class PdPlusNode(Node):
             self.log.warn(f'joint_states refused: {exc}', throttle_s=1.0)
             return
         q, qd = self._select(names, position, velocity)
-        self._last_q = q
+        self._last_q, self._last_qd = q, qd
         self._on_sample(t_in, sec, nanosec, q, qd)
 
     def on_state(self, msg: JointState) -> None:
         """The same for a JointState message object."""
         t_in = time.perf_counter()
         q, qd = self._select(tuple(msg.name), msg.position, msg.velocity)
-        self._last_q = q
+        self._last_q, self._last_qd = q, qd
         self._on_sample(t_in, msg.header.stamp.sec, msg.header.stamp.nanosec, q, qd)
 
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
@@ -503,6 +522,9 @@ class PdPlusNode(Node):
         if self.axis is not None and self.axis.error:
             return False, (f'{self.axis.source} reports error {self.axis.error:#x} '
                            f'({self.axis.error_text}): reset it first')
+        if self.drive_mode not in (None, 'hold'):
+            return False, (f'the drives are in power mode {self.drive_mode}: ~/power_hold '
+                           'first')
         with self._lock:
             prof = self.ctrl.profile
             if prof is not None and self._last_q is not None:
@@ -547,6 +569,60 @@ class PdPlusNode(Node):
         else:
             self.log.warn(text)
         return response
+
+    def on_power_mode(self, mode: str, response):
+        """A power mode for the drives (issue 29): deeper modes only at rest (checked here,
+        then the drive engages its brakes and pdplus stops commanding); hold: the drive powers
+        up and pdplus holds the measured pose. The drive's answer arrives later (logged)."""
+        self._auto_enable_pending = False
+        ok, text = self._power_mode_request(mode)
+        response.success, response.message = ok, text
+        (self.log.info if ok else self.log.warn)(f'power_{mode}: {text}')
+        return response
+
+    def _power_mode_request(self, mode: str) -> tuple[bool, str]:
+        if self.axis is None:
+            return False, 'no axis status yet: no drive to switch'
+        if mode != 'hold':
+            with self._lock:
+                qd = self._last_qd if self._last_qd is not None else _NAN3
+                ok, why = self.ctrl.motors_off(np.asarray(qd, float), dry_run=True)
+            if not ok:
+                return False, why
+        elif self.drive_mode in (None, 'hold'):
+            return True, 'the drives are in hold already'
+        name = f'{self.axis.source}/power_{mode}'
+        client = self._drive_clients.get(name)
+        if client is None:
+            client = self._drive_clients[name] = self.create_client(Trigger, name)
+        if not client.service_is_ready():
+            return False, f'the drive offers no {name} service'
+        fut = client.call_async(Trigger.Request())
+        fut.add_done_callback(lambda f: self._power_mode_done(mode, name, f))
+        return True, f'{mode} requested from {name}'
+
+    def _power_mode_done(self, mode: str, name: str, fut) -> None:
+        """The drive's answer: on success pdplus follows (motors off: IDLE; hold: HOLD the
+        measured pose)."""
+        try:
+            r = fut.result()
+        except Exception as exc:  # noqa: BLE001 - a failed call is logged, nothing changes
+            self.log.error(f'power_{mode}: {name} failed: {exc}')
+            return
+        if not r.success:
+            self.log.error(f'power_{mode}: {name} refused: {r.message}')
+            return
+        with self._lock:
+            if mode == 'hold':
+                q = self._last_q
+                ok, why = (self.ctrl.motors_on(np.asarray(q, float)) if q is not None
+                           else (False, 'no joint state yet'))
+            else:
+                qd = self._last_qd if self._last_qd is not None else _NAN3
+                ok, why = self.ctrl.motors_off(np.asarray(qd, float))
+            self.drive_mode = mode
+        text = f'power mode {mode} ({name}: {r.message}); pdplus: {why}'
+        (self.log.info if ok else self.log.error)(text)
 
     def destroy_node(self):
         self.log.flush(2.0)
