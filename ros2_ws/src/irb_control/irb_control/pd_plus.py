@@ -350,6 +350,9 @@ class PdPlusController:
         self.q_hi = lim.upper - c.position_margin_rad
         self.e_max = np.asarray(c.max_tracking_error_rad, float)
         self.delta = c.prediction_samples * c.period_s
+        #: called with a profile the controller lets go of (None: dropped here at once); a
+        #: node frees it on another thread in slices (profiles.dispose_sliced)
+        self.retire = None
         self.active: PathProfile | TimeTrajectory | None = None    # the running reference
         self.pending: PathProfile | TimeTrajectory | None = None   # offered, not yet enabled
         self.mode = MODE_IDLE
@@ -419,6 +422,8 @@ class PdPlusController:
     def _offer(self, profile, path=None, tracker=None) -> str:
         profile.check_limits(self.model, self.config.velocity_limit_fraction)
         _, why = self._transition(EV_PLAN)
+        if self.pending is not None and self.retire is not None:
+            self.retire(self.pending)
         self.pending = profile
         self.pending_path = self.base_path if path is None else path
         self._pending_tracker = tracker
@@ -439,6 +444,8 @@ class PdPlusController:
         if self.profile is None:
             return False, 'no profile'
         if self.pending is not None:
+            if self.active is not None and self.retire is not None:
+                self.retire(self.active)
             self.active, self.pending = self.pending, None
             if self.pending_path is not self.path:
                 self._use_path(self.pending_path, self._pending_tracker)

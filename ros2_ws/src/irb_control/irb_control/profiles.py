@@ -254,6 +254,23 @@ def build_sliced(cls, arrays: dict, chunk: int = 256, pause=_yield_gil):
     return obj
 
 
+def dispose_sliced(obj, chunk: int = 256, pause=_yield_gil) -> None:
+    """Free a profile (PathProfile, TimeTrajectory) in slices: its plain-float tables
+    (``_rows_l``, ``_xl``, ``_h_slope``: for 20 000 points some 240 000 objects) are emptied
+    ``chunk`` items at a time with ``pause()`` between, so no single piece holds the
+    interpreter lock for long. Dropped in one piece, a 20 000-point PathProfile took 9-11 ms
+    (measured at load 13 on 2 cores): at ~enable, on the control thread, that left a joint
+    state unanswered. Anything else (a dict of such objects, a path) is walked one level."""
+    items = list(obj.values()) if isinstance(obj, dict) else [obj]
+    for it in items:
+        for name in ('_rows_l', '_xl', '_h_slope'):
+            lst = getattr(it, '__dict__', {}).get(name)
+            if isinstance(lst, list):
+                while lst:
+                    del lst[-chunk:]
+                    pause()
+
+
 def _sample_list(obj, x: float, zero_rates_after_end: bool) -> list:
     """Row of ``obj._table`` at x, linear, clamped: the arithmetic of ``sample`` in floats
     (numpy's element-wise a + w (b - a) is IEEE per element, so the result is identical)."""

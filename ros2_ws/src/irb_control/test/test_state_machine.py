@@ -242,3 +242,26 @@ def test_enable_after_hold_ramps_to_the_start_again(model, circle, profiles):
     assert ok
     out = ctrl.step(100.0, outs[-1].q_ref, np.zeros(3))
     assert out.mode == MODE_RAMP
+
+
+def test_profiles_let_go_of_are_retired_not_dropped_and_freed_in_slices(model, circle, profiles):
+    """Issue 32: a profile replaced (a plan over a pending one, the old motion at enable) goes
+    to ``retire`` (pdplus frees it on another thread) instead of being freed where it is
+    replaced; ``dispose_sliced`` empties its tables chunk by chunk with a pause between."""
+    from irb_control.profiles import dispose_sliced
+    path, time_a, time_b = profiles
+    ctrl = PdPlusController(model, circle, ControllerConfig())
+    retired = []
+    ctrl.retire = retired.append
+    ctrl.set_path_profile(path)
+    ctrl.set_time_trajectory(time_a)                   # replaces the pending path profile
+    assert retired == [path]
+    ctrl.enable()                                      # time_a active, nothing let go of
+    ctrl.set_time_trajectory(time_b)
+    ctrl.enable()                                      # time_b active: time_a let go of
+    assert retired == [path, time_a] and ctrl.active is time_b
+    pauses = []
+    n = len(path._rows_l)
+    dispose_sliced(path, chunk=16, pause=lambda: pauses.append(len(path._rows_l)))
+    assert path._rows_l == [] and path._xl == [] and path._h_slope == []
+    assert pauses[0] == n - 16 and len(pauses) >= 3 * (n // 16)
