@@ -580,7 +580,7 @@ def test_hold_service_stops_along_the_profile_and_holds(timed):
         states += _drive(ctrl, None, 10, plant)
     assert states[-1].mode == ControllerState.MODE_HOLD, states[-1].stop_reason
     held = np.array(states[-1].q_ref)
-    after = _drive(ctrl, None, 100, plant)               # 0.4 s held, motors on
+    after = _drive(ctrl, None, 250, plant)               # 1 s held, motors on
     assert {s.mode for s in after} == {ControllerState.MODE_HOLD}
     assert all(np.array_equal(s.q_ref, held) for s in after) and not ctrl.ctrl.stop_reason
     assert np.abs(plant.state.q - held).max() < 2e-3
