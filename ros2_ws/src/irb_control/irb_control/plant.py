@@ -26,7 +26,9 @@ friction element of the joint: the joint stays put while the torque needed to ho
 the brake torque (plus its static friction), no motor torque needed; beyond, it slips against
 it. A command whose torque acts releases the brakes only after ``brake_release_s`` of torque
 against the closed brake (the brake's opening time): whatever the controller commands then
-(the gravity torque) already acts when the joint comes free. ``request_power_mode`` changes the
+(the gravity torque) already acts when the joint comes free. This applies to brakes engaged
+on purpose (at start, by a power mode, by a fault); after a single period without a command in
+a motion the brakes open again at once, as before. ``request_power_mode`` changes the
 drives' power mode (``POWER_MODES``: hold = motors on; brakes, bus_off, hibernate = brakes
 engaged, torque off, commands ignored until hold is requested); a change takes its transition
 time. Without ``brake_torque_nm`` (None) the brakes hold any torque exactly (the former model).
@@ -227,6 +229,10 @@ class Plant:
         self._mode_done_t = 0.0                 # ... reached at this time [s]
         self._auto_hold = True       # a command switches brakes -> hold (no explicit request)
         self._release_t: float | None = None    # the brakes open at this time [s]
+        # the opening time applies to brakes engaged on purpose (start, power mode, fault),
+        # not to a period without a command in the middle of a motion (released at once, as
+        # before: the drive holds on; its timeout is what engages the brakes for good)
+        self._slow_release = True
         self.rejected_mode = 0       # commands ignored because the motors were off
         self.error = ''              # latched fault ('' = none): commands ignored until cleared
         self.friction_torque = np.zeros(3)
@@ -265,6 +271,7 @@ class Plant:
             return False, f'error latched ({self.error}): reset first'
         if mode != 'hold':
             self.braked = True
+            self._slow_release = True
             self._release_t = None
             self._latest = None
             self._pipeline = deque([None] * self.config.delay_samples)
@@ -361,6 +368,7 @@ class Plant:
             self._latest = None
             self._pipeline = deque([None] * c.delay_samples)
             self.power_mode = 'brakes'           # power stages off on a fault
+            self._slow_release = True
         self._pipeline.append(self._latest)
         applied = self._pipeline.popleft()
         if applied is None:
@@ -371,13 +379,16 @@ class Plant:
         else:
             if self.braked:
                 if self._release_t is None:      # torque on the closed brake from now on
-                    self._release_t = s.t + c.brake_release_s
+                    self._release_t = s.t + (c.brake_release_s if self._slow_release
+                                             else 0.0)
                 if s.t >= self._release_t - 1e-12:
                     self.events.append((s.t, 'command received: brakes released'
                                         + (f' after {c.brake_release_s:.3f} s of torque'
-                                           if c.brake_release_s else '')))
+                                           if c.brake_release_s and self._slow_release
+                                           else '')))
                     self.braked = False
                     self._release_t = None
+                    self._slow_release = False
             self.applied = applied
         t0 = s.t
         tau = self.applied.tolist()
