@@ -134,7 +134,9 @@ def test_power_modes_in_electrical_power_and_their_transition_times(sim):
     time, drawing the transition's energy meanwhile; modes changed by service, logged."""
     from std_srvs.srv import Trigger
     from irb_description.power_modes import load_power_modes
-    pm = load_power_modes(electrical=sim.electrical)
+    # the YAML's transitions (up to 45 s) shortened 20x: the same rules, 3 s simulated
+    pm = load_power_modes(electrical=sim.electrical).with_params(duration_factor=0.05)
+    sim.power_modes = pm
     sim.pub_state, sim.pub_power = _Capture(), _Capture()
     pl = sim.plant
     pl.reset(np.array([0.0, 0.9, 0.25]))
