@@ -6,7 +6,8 @@
     ros2 run irb_bringup ctl stop       # pdplus ~/stop: safe stop, latched until enable
     ros2 run irb_bringup ctl reset      # clear the drive's latched error (simulator or
                                         # axis_bridge ~/reset; pdplus's ~/reset if it has one)
-    ros2 run irb_bringup ctl hold       # pdplus ~/hold, where pdplus offers it
+    ros2 run irb_bringup ctl hold       # pdplus ~/hold: controlled stop along the path,
+                                        # then hold the pose (motors on, nothing latched)
     ros2 run irb_bringup ctl enable --wait   # enable, then wait until the motion it started
                                         # has ended (hold or idle); exit 1 if pdplus stops
     ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (hold: after a

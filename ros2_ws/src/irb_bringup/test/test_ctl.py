@@ -243,5 +243,8 @@ def test_status_of_the_real_simulator_and_pdplus(tmp_path, capsys):
         assert 'drive (simulator): motors off, brakes engaged, no error' in out
         assert re.search(rf'{ns}/joint_states +[0-9.]+ Hz', out), out
         assert re.search(rf'{ns}/torque_command +(no messages|[0-9.]+ Hz)', out), out
+        # ctl hold reaches the real ~/hold: an idle pdplus refuses it with its reason
+        assert main(['hold', '--pdplus', f'{ns}/pdplus', '--timeout', '60']) == 1
+        assert f'hold ({ns}/pdplus/hold): refused: idle' in capsys.readouterr().err
     finally:
         stop_sessions(procs)

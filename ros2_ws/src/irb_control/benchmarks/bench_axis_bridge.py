@@ -38,7 +38,8 @@ def main() -> int:
         ProcessSpec('bridge', ros2_run_cmd('irb_control', 'axis_bridge', params=ports,
                                            remaps=remap)),
         ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', remaps=remap,
-                                           params={'profile_duration_s': 10.0})),
+                                           params={'profile_duration_s': 10.0,
+                                                   'auto_enable': True})),
         # the axis computer waits for nothing: it idles on brakes until pdplus answers
         ProcessSpec('axis', ros2_run_cmd('irb_control', 'fake_axis_computer', remaps=remap,
                                          params={**ports, 'duration_s': ns.seconds,

@@ -103,7 +103,7 @@ def _loop_run(duration: float, rt_priority: int) -> dict:
     tag = f'_rt{rt_priority}' if rt_priority else ''
     logs = {n: open(RESULTS / f'loop_{n}{tag}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
-                             '-p', 'profile_duration_s:=10.0'],
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=true'],
                             stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
                             '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}'],
@@ -338,6 +338,8 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
         dur = [1e3 * m.step_duration for t, m in steps if a <= t <= b]
         modes = sorted({int(m.mode) for t, m in steps if a <= t <= b})
         return {'kind': kind, 'states': len(ss), 'unanswered': unanswered, 'modes': modes,
+                # when in the window [s from its start] each unanswered state went out
+                'unanswered_at_s': [round(t - a, 4) for t, lat in ss if lat is None][:20],
                 'latency_ms_p50': float(np.median(lat)) if lat else None,
                 'latency_ms_max': float(max(lat)) if lat else None,
                 'pdplus_step_ms_max': float(max(dur)) if dur else None}

@@ -1,11 +1,16 @@
-"""Axis-computer torque protocol, version 2: packet layout, encode, decode (no ROS imports).
+"""Axis-computer torque protocol, version 3: packet layout, encode, decode (no ROS imports).
 
 EGM-shaped UDP protocol with a torque payload (spec: doc/axis_protocol.md). The axis computer
 is the clock master: every 4.032 ms it sends a STATE packet; the external controller answers
 with a COMMAND packet carrying the same sequence number before the next cycle.
 All fields little-endian, fixed layout, CRC-32 (zlib) over everything before the CRC field.
 Version 2 adds a session id (random per start of the axis computer, echoed by every command)
-and the supervision error bits; the sequence rules are in ``SequenceTracker``.
+and the supervision error bits; the sequence rules are in ``SequenceTracker``. Version 3 (issue
+29) carries the drives' power mode: the command's two reserved bytes become ``brake_request``
+and ``power_mode_request`` (same 80 bytes; 0 = no request, which is what every version-2
+command holds), and the state grows by 4 bytes (``brakes_engaged``, ``power_mode``, 2
+reserved). Both decoders take versions 2 and 3 (``SUPPORTED_VERSIONS``); a version-2 state
+decodes with brakes_engaged = not motors_on and power_mode 0 (unknown).
 """
 from __future__ import annotations
 
@@ -15,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-VERSION = 2
+VERSION = 3
+SUPPORTED_VERSIONS = (2, 3)
 N_JOINTS = 6
 MAGIC_STATE = b'IRBS'
 MAGIC_COMMAND = b'IRBC'
@@ -25,6 +31,13 @@ CYCLE_S = 0.004032
 MODE_IDLE = 0            # axis computer runs its own position control (motors may be on)
 MODE_TORQUE = 1          # external torque references are applied
 MODE_NAMES = {MODE_IDLE: 'idle', MODE_TORQUE: 'torque'}
+
+# command.power_mode_request and state.power_mode (irb_description.power_modes.MODES)
+POWER_NONE = 0           # command: no request; state: unknown (a version-2 peer)
+POWER_MODES = {1: 'hold', 2: 'brakes', 3: 'bus_off', 4: 'hibernate'}
+POWER_CODES = {name: code for code, name in POWER_MODES.items()}
+# command.brake_request: the brakes as such (engage = the brakes mode, release = hold)
+BRAKE_NONE, BRAKE_ENGAGE, BRAKE_RELEASE = 0, 1, 2
 
 # status.error bit flags (latched by the axis computer until reset)
 ERR_NONE = 0
@@ -44,10 +57,14 @@ def error_text(error: int) -> str:
         f'unknown error {error:#x}' if error else '')
 
 _HEADER = struct.Struct('<4sHHIIQ')   # magic, version, size, seq, session, time [ns]
-_STATE_BODY = struct.Struct(f'<{3 * N_JOINTS}dBBH')  # q, qd, tau, motors_on, mode, error
-_COMMAND_BODY = struct.Struct(f'<{N_JOINTS}dBBH')    # tau_ref, mode_request, reset, reserved
+_STATE_BODY_V2 = struct.Struct(f'<{3 * N_JOINTS}dBBH')  # q, qd, tau, motors_on, mode, error
+# version 3: + brakes_engaged, power_mode, reserved
+_STATE_BODY = struct.Struct(f'<{3 * N_JOINTS}dBBHBBH')
+# tau_ref, mode_request, reset, brake_request, power_mode_request (version 2: reserved uint16 0)
+_COMMAND_BODY = struct.Struct(f'<{N_JOINTS}dBBBB')
 _CRC = struct.Struct('<I')
 STATE_SIZE = _HEADER.size + _STATE_BODY.size + _CRC.size
+STATE_SIZE_V2 = _HEADER.size + _STATE_BODY_V2.size + _CRC.size
 COMMAND_SIZE = _HEADER.size + _COMMAND_BODY.size + _CRC.size
 
 
@@ -74,6 +91,9 @@ class StatePacket:
     mode: int = MODE_TORQUE
     error: int = ERR_NONE
     session: int = 0
+    brakes_engaged: bool = False
+    power_mode: int = POWER_NONE         # POWER_MODES code; 0 = unknown (version 2)
+    version: int = VERSION
 
 
 @dataclass
@@ -86,6 +106,9 @@ class CommandPacket:
     mode_request: int = MODE_TORQUE
     reset: bool = False
     session: int = 0
+    brake_request: int = BRAKE_NONE
+    power_mode_request: int = POWER_NONE
+    version: int = VERSION
 
 
 def _finish(head_and_body: bytes) -> bytes:
@@ -93,58 +116,75 @@ def _finish(head_and_body: bytes) -> bytes:
 
 
 def encode_state(p: StatePacket) -> bytes:
-    """STATE_SIZE bytes for ``p``."""
-    body = _STATE_BODY.pack(*np.asarray(p.q, float), *np.asarray(p.qd, float),
-                            *np.asarray(p.tau, float), int(bool(p.motors_on)), int(p.mode),
-                            int(p.error))
-    return _finish(_HEADER.pack(MAGIC_STATE, VERSION, STATE_SIZE, p.seq & 0xFFFFFFFF,
+    """STATE_SIZE bytes for ``p`` (STATE_SIZE_V2 for ``p.version`` 2: no power fields)."""
+    common = (*np.asarray(p.q, float), *np.asarray(p.qd, float), *np.asarray(p.tau, float),
+              int(bool(p.motors_on)), int(p.mode), int(p.error))
+    if p.version == 2:
+        body, size = _STATE_BODY_V2.pack(*common), STATE_SIZE_V2
+    else:
+        body, size = _STATE_BODY.pack(*common, int(bool(p.brakes_engaged)),
+                                      int(p.power_mode), 0), STATE_SIZE
+    return _finish(_HEADER.pack(MAGIC_STATE, int(p.version), size, p.seq & 0xFFFFFFFF,
                                 p.session & 0xFFFFFFFF, p.stamp_ns) + body)
 
 
 def encode_command(c: CommandPacket) -> bytes:
     """COMMAND_SIZE bytes for ``c``."""
+    v2 = c.version == 2            # version 2: the two bytes are reserved (0)
     body = _COMMAND_BODY.pack(*np.asarray(c.tau_ref, float), int(c.mode_request),
-                              int(bool(c.reset)), 0)
-    return _finish(_HEADER.pack(MAGIC_COMMAND, VERSION, COMMAND_SIZE, c.seq & 0xFFFFFFFF,
-                                c.session & 0xFFFFFFFF, c.stamp_ns) + body)
+                              int(bool(c.reset)), 0 if v2 else int(c.brake_request),
+                              0 if v2 else int(c.power_mode_request))
+    return _finish(_HEADER.pack(MAGIC_COMMAND, int(c.version), COMMAND_SIZE,
+                                c.seq & 0xFFFFFFFF, c.session & 0xFFFFFFFF, c.stamp_ns) + body)
 
 
-def _check(data: bytes, magic: bytes, size: int) -> tuple[int, int, int]:
-    if len(data) != size:
-        raise ProtocolError('size', f'{len(data)} bytes, expected {size}')
+def _check(data: bytes, magic: bytes, sizes: dict) -> tuple[int, int, int, int]:
+    """(seq, session, stamp, version) of a valid frame; ``sizes``: version -> size."""
+    if len(data) < _HEADER.size:
+        raise ProtocolError('size', f'{len(data)} bytes, expected {sizes[VERSION]}')
     got_magic, version, declared, seq, session, stamp = _HEADER.unpack_from(data)
     if got_magic != magic:
         raise ProtocolError('magic', f'{got_magic!r}, expected {magic!r}')
-    if version != VERSION:
-        raise ProtocolError('version', f'{version}, expected {VERSION}')
+    if version not in SUPPORTED_VERSIONS:
+        raise ProtocolError('version', f'{version}, expected one of {SUPPORTED_VERSIONS}')
+    size = sizes[version]
+    if len(data) != size:
+        raise ProtocolError('size', f'{len(data)} bytes, expected {size}')
     if declared != size:
         raise ProtocolError('size', f'header says {declared} bytes, expected {size}')
     (crc,) = _CRC.unpack_from(data, size - _CRC.size)
     if crc != zlib.crc32(data[:size - _CRC.size]):
         raise ProtocolError('crc', 'checksum mismatch')
-    return seq, session, stamp
+    return seq, session, stamp, version
 
 
 def decode_state(data: bytes) -> StatePacket:
     """Parse and validate a STATE datagram; non-finite values raise ProtocolError('nan')."""
-    seq, session, stamp = _check(data, MAGIC_STATE, STATE_SIZE)
-    v = _STATE_BODY.unpack_from(data, _HEADER.size)
+    seq, session, stamp, version = _check(data, MAGIC_STATE, {2: STATE_SIZE_V2, 3: STATE_SIZE})
+    v = (_STATE_BODY_V2 if version == 2 else _STATE_BODY).unpack_from(data, _HEADER.size)
     arr = np.array(v[:3 * N_JOINTS], float)
     if not np.all(np.isfinite(arr)):
         raise ProtocolError('nan', 'non-finite joint value in state', seq, session)
-    n = N_JOINTS
-    return StatePacket(seq, stamp, arr[:n], arr[n:2 * n], arr[2 * n:], bool(v[-3]), v[-2],
-                       v[-1], session)
+    n, k = N_JOINTS, 3 * N_JOINTS
+    motors_on = bool(v[k])
+    brakes, power = (not motors_on, POWER_NONE) if version == 2 else (bool(v[k + 3]),
+                                                                       int(v[k + 4]))
+    return StatePacket(seq, stamp, arr[:n], arr[n:2 * n], arr[2 * n:], motors_on, v[k + 1],
+                       v[k + 2], session, brakes, power, version)
 
 
 def decode_command(data: bytes) -> CommandPacket:
     """Parse and validate a COMMAND datagram; non-finite torques raise ProtocolError('nan')."""
-    seq, session, stamp = _check(data, MAGIC_COMMAND, COMMAND_SIZE)
+    seq, session, stamp, version = _check(data, MAGIC_COMMAND, {2: COMMAND_SIZE,
+                                                               3: COMMAND_SIZE})
     v = _COMMAND_BODY.unpack_from(data, _HEADER.size)
     tau = np.array(v[:N_JOINTS], float)
     if not np.all(np.isfinite(tau)):
         raise ProtocolError('nan', 'non-finite torque in command', seq, session)
-    return CommandPacket(seq, stamp, tau, v[N_JOINTS], bool(v[N_JOINTS + 1]), session)
+    n = N_JOINTS
+    brake, power = (0, 0) if version == 2 else (v[n + 2], v[n + 3])
+    return CommandPacket(seq, stamp, tau, v[n], bool(v[n + 1]), session, brake, power,
+                         version)
 
 
 def seq_newer(a: int, b: int) -> bool:

@@ -21,9 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .axis_protocol import (ERR_BAD_COMMAND, ERR_COMM_TIMEOUT, ERR_NONE, ERR_POSITION_LIMIT,
-                            ERR_SPEED_LIMIT, ERR_TORQUE_LIMIT, MODE_IDLE, MODE_TORQUE, N_JOINTS,
-                            ProtocolError, StatePacket, decode_command, encode_state, error_text)
+from .axis_protocol import (BRAKE_ENGAGE, BRAKE_NONE, BRAKE_RELEASE, ERR_BAD_COMMAND,
+                            ERR_COMM_TIMEOUT, ERR_NONE, ERR_POSITION_LIMIT, ERR_SPEED_LIMIT,
+                            ERR_TORQUE_LIMIT, MODE_IDLE, MODE_TORQUE, N_JOINTS, POWER_CODES,
+                            POWER_MODES, VERSION, ProtocolError, StatePacket, decode_command,
+                            encode_state, error_text)
 from .plant import Plant
 
 FAULT_KINDS = ('drop', 'delay', 'duplicate', 'reorder', 'corrupt', 'nan')
@@ -59,10 +61,14 @@ class FakeAxisCore:
 
     def __init__(self, plant: Plant, faults: FaultConfig = FaultConfig(), miss_limit: int = 3,
                  torque_limit: np.ndarray | None = None, controller: tuple | None = None,
-                 session: int | None = None, speed_margin: float = 1.05):
+                 session: int | None = None, speed_margin: float = 1.05,
+                 transition_s=None, version: int = VERSION):
         if miss_limit < 1:
             raise ValueError('miss_limit must be >= 1')
         self.plant = plant
+        #: (from, to) -> duration [s] of a power-mode change (default: at once)
+        self.transition_s = transition_s or (lambda a, b: 0.0)
+        self.version = int(version)      # of the states sent (2 for a version-2 controller)
         self.faults = faults
         self.miss_limit = miss_limit
         self.torque_limit = (np.asarray(torque_limit, float) if torque_limit is not None
@@ -100,7 +106,9 @@ class FakeAxisCore:
         return StatePacket(self.seq, int(round(y.t * 1e9)), q, qd, tau,
                            motors_on=not self.plant.braked,
                            mode=MODE_TORQUE if self.engaged else MODE_IDLE, error=self.error,
-                           session=self.session)
+                           session=self.session, brakes_engaged=self.plant.braked,
+                           power_mode=POWER_CODES[self.plant.power_mode],
+                           version=self.version)
 
     def begin_cycle(self) -> list[tuple[float, bytes]]:
         """Start cycle ``seq + 1``: datagrams to send as (offset [s] from now, bytes)."""
@@ -160,6 +168,23 @@ class FakeAxisCore:
             self.plant.clear_error()
         if self.latched:
             self.rejected['latched'] += 1
+            return False
+        want = (POWER_MODES.get(cmd.power_mode_request)
+                or {BRAKE_ENGAGE: 'brakes', BRAKE_RELEASE: 'hold'}.get(cmd.brake_request))
+        if (cmd.power_mode_request and cmd.power_mode_request not in POWER_MODES) or \
+                cmd.brake_request not in (BRAKE_NONE, BRAKE_ENGAGE, BRAKE_RELEASE):
+            self.rejected['bad_power_request'] += 1
+            self._latch(ERR_BAD_COMMAND, f'unknown power mode request '
+                        f'{cmd.power_mode_request} / brake request {cmd.brake_request}')
+            return False
+        if want is not None and want not in (self.plant.power_mode, self.plant.mode_target):
+            ok, text = self.plant.request_power_mode(
+                want, self.transition_s(self.plant.power_mode, want))
+            self.events.append(f'seq {self.seq}: power mode {want} requested: {text}')
+        if self.plant.motors_off_requested:
+            # the motors are off on request: no torque is applied, nothing is missed
+            self.engaged = False
+            self.rejected['motors_off'] += 1
             return False
         if cmd.mode_request == MODE_IDLE:
             if self.engaged:

@@ -36,7 +36,9 @@ tests walk the whole table). A plan offered in any state is stored as the *pendi
 it never changes the reference of a running motion or of the hold, and never clears a latched
 stop. Only ``enable`` (in IDLE, HOLD or STOPPED) takes the pending profile and starts the ramp
 from where the robot is; the stop reason stays readable after the stop is cleared
-(``last_stop_reason``).
+(``last_stop_reason``). ``hold`` (a controlled stop, no latched error) lets a moving reference
+decelerate along itself -- its progress rate falling smoothly from 1 to 0 -- and then holds
+the pose it came to rest at (HOLD, motors on).
 """
 from __future__ import annotations
 
@@ -73,7 +75,11 @@ EV_STOP = 'stop'              # operator stop, watchdog, fault, safety trip
 EV_PLAN = 'plan'              # a validated plan is offered
 EV_RAMP_DONE = 'ramp_done'    # the ramp reached the start of the profile
 EV_MOTION_DONE = 'motion_done'  # the profile ended
-EVENTS = (EV_ENABLE, EV_STOP, EV_PLAN, EV_RAMP_DONE, EV_MOTION_DONE)
+EV_HOLD = 'hold'              # operator: controlled stop along the reference, then hold
+EV_MOTORS_OFF = 'motors_off'  # the drives engaged their brakes on request (a deeper mode)
+EV_MOTORS_ON = 'motors_on'    # the drives are back in hold: hold the pose they stand at
+EVENTS = (EV_ENABLE, EV_STOP, EV_PLAN, EV_RAMP_DONE, EV_MOTION_DONE, EV_HOLD, EV_MOTORS_OFF,
+          EV_MOTORS_ON)
 _ARRIVE = 'PATH or TIME'      # the profile's own mode (theta- or time-driven)
 
 #: (state, event) -> (next state, or None = refused and nothing changes; why)
@@ -109,6 +115,29 @@ TRANSITIONS = {
     (MODE_STOPPED, EV_PLAN): (MODE_STOPPED, 'stored as pending: a plan never clears a stop'),
     (MODE_STOPPED, EV_RAMP_DONE): (None, 'stopped'),
     (MODE_STOPPED, EV_MOTION_DONE): (None, 'stopped'),
+    # hold: the motion decelerates along its own reference (same mode meanwhile), then HOLD
+    (MODE_IDLE, EV_HOLD): (None, 'idle: no pose is held (motors off); enable starts a motion'),
+    (MODE_RAMP, EV_HOLD): (MODE_HOLD, 'controlled stop along the ramp, then hold the pose'),
+    (MODE_PATH, EV_HOLD): (MODE_HOLD, 'controlled stop along the path, then hold the pose'),
+    (MODE_TIME, EV_HOLD): (MODE_HOLD, 'controlled stop along the trajectory, then hold the '
+                                      'pose'),
+    (MODE_HOLD, EV_HOLD): (MODE_HOLD, 'already holding'),
+    (MODE_STOPPED, EV_HOLD): (None, 'stopped (latched): a hold never clears a stop; enable '
+                                    'clears it'),
+    # power modes: brakes only at rest (idle, or holding and measured at rest); back on, the
+    # pose the brakes hold is held by the motors (the gravity torque acts before release)
+    (MODE_IDLE, EV_MOTORS_OFF): (MODE_IDLE, 'motors off on the brakes'),
+    (MODE_RAMP, EV_MOTORS_OFF): (None, 'moving (ramp): brakes only at rest; hold first'),
+    (MODE_PATH, EV_MOTORS_OFF): (None, 'moving (path): brakes only at rest; hold first'),
+    (MODE_TIME, EV_MOTORS_OFF): (None, 'moving (time): brakes only at rest; hold first'),
+    (MODE_HOLD, EV_MOTORS_OFF): (MODE_IDLE, 'motors off on the brakes (from hold)'),
+    (MODE_STOPPED, EV_MOTORS_OFF): (MODE_STOPPED, 'stopped: the brakes are engaged already'),
+    (MODE_IDLE, EV_MOTORS_ON): (MODE_HOLD, 'motors on: hold the pose the brakes held'),
+    (MODE_RAMP, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_PATH, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_TIME, EV_MOTORS_ON): (None, 'moving: the motors are on'),
+    (MODE_HOLD, EV_MOTORS_ON): (MODE_HOLD, 'already holding'),
+    (MODE_STOPPED, EV_MOTORS_ON): (None, 'stopped (latched): enable clears it'),
 }
 
 
@@ -137,6 +166,22 @@ def quintic_ramp(q0: np.ndarray, q1: np.ndarray, duration: float, t: float):
     return q0 + s * d, ds * d, dds * d
 
 
+def _halt_rate(halt: tuple, r: float) -> tuple:
+    """A controlled stop (r_s, T_s, v_s) at reference time r [s]: the progress rate
+    k = 1 - 3u^2 + 2u^3 (u = (r - r_s) / T_s in [0, 1]), dk/dt, the virtual time
+    v_s + T_s (u - u^3 + u^4 / 2) (the integral of k) and u."""
+    r_s, T_s, v_s = halt
+    u = min(max((r - r_s) / T_s, 0.0), 1.0)
+    return (1.0 - u * u * (3.0 - 2.0 * u), -6.0 * u * (1.0 - u) / T_s,
+            v_s + T_s * (u - u ** 3 + 0.5 * u ** 4), u)
+
+
+def _scaled(q, qd, qdd, k: float, k_dot: float) -> tuple:
+    """References along the same curve run at the rate k: qd k, qdd k^2 + qd dk/dt."""
+    return (q, [x * k for x in qd],
+            [qdd[i] * k * k + qd[i] * k_dot for i in range(3)])
+
+
 def ramp_duration(q0: np.ndarray, q1: np.ndarray, velocity_limit: np.ndarray,
                   minimum: float = 0.5, speed_fraction: float = 0.5) -> float:
     """Ramp time [s]: ``minimum`` (0.5 s, thesis §6.4.4), longer if the quintic's peak speed
@@ -162,6 +207,11 @@ class ControllerConfig:
     position_margin_rad: float = 0.0              # stop this far inside the position limits
     max_tracking_error_rad: tuple = (0.05, 0.05, 0.05)
     end_tolerance_rad: float = 1e-3               # theta_v within this of the end: hold
+    #: controlled stop (``hold``): the reference's progress rate falls from 1 to 0 as
+    #: 1 - 3u^2 + 2u^3 over T_s = max(hold_min_duration_s, 1.5 max_i |qd_ref_i| / a_i), a_i
+    #: the motion's own peak acceleration of joint i (not below hold_min_deceleration)
+    hold_min_duration_s: float = 0.2              # [s]
+    hold_min_deceleration_rad_s2: float = 0.5     # [rad/s^2]
     theta_max_lead_rad: float = 0.05              # progress governor, 0 = pure thesis
     #: how q, qd are carried over the delay: 'commanded' (accelerations of the commands in
     #: flight), 'reference' (the reference acceleration at t + Delta, the thesis's rule), or
@@ -300,6 +350,9 @@ class PdPlusController:
         self.q_hi = lim.upper - c.position_margin_rad
         self.e_max = np.asarray(c.max_tracking_error_rad, float)
         self.delta = c.prediction_samples * c.period_s
+        #: called with a profile the controller lets go of (None: dropped here at once); a
+        #: node frees it on another thread in slices (profiles.dispose_sliced)
+        self.retire = None
         self.active: PathProfile | TimeTrajectory | None = None    # the running reference
         self.pending: PathProfile | TimeTrajectory | None = None   # offered, not yet enabled
         self.mode = MODE_IDLE
@@ -309,6 +362,9 @@ class PdPlusController:
         self.rejected_inputs = 0
         self._enable_requested = False
         self._prev_tau: np.ndarray | None = None
+        self._halt_T: float | None = None     # hold requested: stop duration T_s [s] ...
+        self._halt: tuple | None = None       # ... then (r_s, T_s, v_s) from the next step
+        self._last_qd_ref = [0.0, 0.0, 0.0]   # the last command's reference speed
         self._theta = 0.0
         self._theta_v = 0.0
         self._t0 = 0.0
@@ -366,6 +422,8 @@ class PdPlusController:
     def _offer(self, profile, path=None, tracker=None) -> str:
         profile.check_limits(self.model, self.config.velocity_limit_fraction)
         _, why = self._transition(EV_PLAN)
+        if self.pending is not None and self.retire is not None:
+            self.retire(self.pending)
         self.pending = profile
         self.pending_path = self.base_path if path is None else path
         self._pending_tracker = tracker
@@ -386,11 +444,14 @@ class PdPlusController:
         if self.profile is None:
             return False, 'no profile'
         if self.pending is not None:
+            if self.active is not None and self.retire is not None:
+                self.retire(self.active)
             self.active, self.pending = self.pending, None
             if self.pending_path is not self.path:
                 self._use_path(self.pending_path, self._pending_tracker)
             self.pending_path = self._pending_tracker = None
         self._enable_requested = True
+        self._halt_T = self._halt = None
         self._in_flight.clear()
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
@@ -404,8 +465,72 @@ class PdPlusController:
             self.last_stop_reason = reason
         self.mode = MODE_STOPPED
         self._enable_requested = False
+        self._halt_T = self._halt = None
         self._prev_tau = None
         self._in_flight.clear()
+
+    def hold(self) -> tuple[bool, str]:
+        """Controlled stop (the ``hold`` event): a moving reference (ramp, path, time)
+        decelerates along itself, its progress rate falling smoothly from 1 to 0 over T_s
+        (``ControllerConfig.hold_min_duration_s``), then HOLD keeps the pose it stopped at,
+        motors on; no stop is latched. Refused in IDLE and in STOPPED (a latched stop stays
+        latched); in HOLD, or while already stopping, nothing changes. (ok, why)"""
+        nxt, why = self._transition(EV_HOLD)
+        if nxt is None:
+            return False, why
+        if self.mode == MODE_HOLD:
+            return True, why
+        if self._halt_T is not None or self._halt is not None:
+            T_s = self._halt[1] if self._halt is not None else self._halt_T
+            return True, f'already stopping (in {T_s:.2f} s from the request)'
+        c = self.config
+        if self.mode == MODE_RAMP:      # the quintic's peak acceleration 10/sqrt(3) |d| / T^2
+            peak = 10.0 / math.sqrt(3.0) * np.abs(self._ramp_to - self._ramp_from) \
+                / self._ramp_T ** 2
+        else:
+            peak = np.max(np.abs(self.active.qdd), axis=0)
+        a = np.maximum(peak, c.hold_min_deceleration_rad_s2)
+        self._halt_T = float(max(c.hold_min_duration_s,
+                                 1.5 * np.max(np.abs(self._last_qd_ref) / a)))
+        return True, f'{why}: decelerating in {self._halt_T:.2f} s'
+
+    def motors_off(self, qd: np.ndarray, rest_speed: float = 0.01,
+                   dry_run: bool = False) -> tuple[bool, str]:
+        """The drives are to engage their brakes (a deeper power mode): only at rest -- idle,
+        or holding with every measured |qd| (3,) [rad/s] below ``rest_speed`` -- then IDLE
+        (no command, no stop reason); ``dry_run``: only whether it may. (ok, why)"""
+        nxt, why = self._transition(EV_MOTORS_OFF)
+        if nxt is None:
+            return False, why
+        if self.mode == MODE_HOLD and np.max(np.abs(qd)) >= rest_speed:
+            return False, (f'not at rest (|qd| = {np.abs(qd).round(4).tolist()} rad/s >= '
+                           f'{rest_speed}): brakes only at rest')
+        if dry_run:
+            return True, why
+        if self.mode != MODE_STOPPED:
+            self.mode = MODE_IDLE
+            self._enable_requested = False
+            self._halt_T = self._halt = None
+            self._prev_tau = None
+            self._in_flight.clear()
+        return True, why
+
+    def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
+        """The drives are back in hold: HOLD the measured pose q (3,) [rad] (the commands
+        carry its gravity torque from the first one on, before the brakes open)."""
+        nxt, why = self._transition(EV_MOTORS_ON)
+        if nxt is None or self.mode == MODE_HOLD:
+            return nxt is not None, why
+        self.mode = MODE_HOLD
+        self._hold = np.asarray(q, float).tolist()
+        self._prev_tau = None
+        self._in_flight.clear()
+        return True, why
+
+    @property
+    def stopping(self) -> bool:
+        """A hold was requested and the motion is decelerating towards it."""
+        return self._halt_T is not None or self._halt is not None
 
     @property
     def time_driven(self) -> bool:
@@ -465,21 +590,38 @@ class PdPlusController:
         d = self.delta
         tp = t + d
         time_driven = isinstance(prof, TimeTrajectory)
-        if self.mode == MODE_RAMP and tp - self._t0 >= self._ramp_T:
+        halt = None     # a controlled stop (hold): (r_s, T_s, v_s), from the step after hold()
+        if self._halt_T is not None or self._halt is not None:
+            if self.mode not in MOVING:             # the motion ended by itself meanwhile
+                self._halt_T = self._halt = None
+            else:
+                if self._halt is None:              # starts at this step's reference time
+                    self._halt = (tp, self._halt_T, tp - self._t0)
+                    self._halt_T = None
+                halt = self._halt
+        if self.mode == MODE_RAMP and halt is None and tp - self._t0 >= self._ramp_T:
             self.mode = self._transition(EV_RAMP_DONE)[0]
             self._t0 = self._t0 + self._ramp_T     # time origin of the profile
             self._theta = prof.theta_start if not time_driven else 0.0
             self._theta_v = self._theta
+        if halt is not None:     # progress rate k (1 -> 0), its rate, the virtual time at tp
+            k, k_dot, v_tp, u = _halt_rate(halt, tp)
         if self.mode == MODE_RAMP:
             q_ref, qd_ref, qdd_ref = (x.tolist() for x in quintic_ramp(
-                self._ramp_from, self._ramp_to, self._ramp_T, tp - self._t0))
+                self._ramp_from, self._ramp_to, self._ramp_T,
+                tp - self._t0 if halt is None else v_tp))
+            if halt is not None:
+                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
         elif self.mode == MODE_TIME:
-            row = prof.sample_list(tp - self._t0)
+            tau = tp - self._t0 if halt is None else v_tp
+            row = prof.sample_list(tau)
             q_ref, qd_ref, qdd_ref = row[0:3], row[3:6], row[6:9]
-            if tp - self._t0 >= prof.duration:
+            if halt is not None:
+                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
+            if tau >= prof.duration:
                 self.mode = self._transition(EV_MOTION_DONE)[0]
                 self._hold = prof.q[-1].tolist()
-        elif self.mode == MODE_HOLD and time_driven:
+        elif self.mode == MODE_HOLD and (time_driven or prof is None):
             q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
         else:   # PATH or HOLD on a theta-profile
             raw = self._theta_of(q)
@@ -490,12 +632,17 @@ class PdPlusController:
             T = self.config.period_s
             # progress governor: theta_v runs on h(theta_v) but stays within
             # [theta, theta + theta_max_lead_rad]; 0 lead = theta from the measurement only
-            tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
+            if halt is None:
+                tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
+            else:        # a controlled stop: theta_v and the prediction advance at k h
+                tv = min(self._theta_v + T * _halt_rate(halt, t)[0] * prof.h(self._theta_v),
+                         prof.theta_end)
             tv = min(max(tv, theta), theta + self.config.theta_max_lead_rad)
             self._theta_v = tv
             th = tv
-            for _ in range(self.config.prediction_samples):
-                th = min(th + T * prof.h(th), prof.theta_end)
+            for j in range(self.config.prediction_samples):
+                kj = 1.0 if halt is None else _halt_rate(halt, t + (j + 1) * T)[0]
+                th = min(th + T * kj * prof.h(th), prof.theta_end)
             theta_p = th
             if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
                 if self.mode != MODE_HOLD:
@@ -507,6 +654,15 @@ class PdPlusController:
                 row = prof.sample_list(th)
                 theta_dot_ref = row[0]
                 q_ref, qd_ref, qdd_ref = row[2:5], row[5:8], row[8:11]
+                if halt is not None:
+                    theta_dot_ref *= k
+                    q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
+        if halt is not None and u >= 1.0 and self.mode in MOVING:
+            # the reference has come to rest on its own path: hold that pose, motors on
+            self.mode = MODE_HOLD
+            self._hold = list(q_ref)
+            self._halt = None
+            q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
 
         # delay compensation of the measurement, 'reference': q_p = q + d qd + d^2/2 qdd_ref,
         # qd_p = qd + d qdd_ref; 'commanded': the in-flight accelerations a_j instead (see
@@ -570,6 +726,7 @@ class PdPlusController:
             tau[i] = min(max(x, -tmax[i]), tmax[i])
         tau_a = np.array(tau)
         self._prev_tau = tau_a
+        self._last_qd_ref = qd_ref
         if self._commanded:
             fl.append((qdd_ref[0], qdd_ref[1], qdd_ref[2]))
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,

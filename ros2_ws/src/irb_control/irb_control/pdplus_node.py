@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import gc
 import math
+import queue
 import sys
 import threading
 import time
@@ -37,7 +38,9 @@ from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_swit
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
-from .profiles import ProfileError, TimeTrajectory, default_circle_profile, sine_trajectory
+from .plant import POWER_MODES
+from .profiles import (ProfileError, TimeTrajectory, default_circle_profile, dispose_sliced,
+                       sine_trajectory)
 
 
 _d = ControllerConfig()
@@ -90,9 +93,10 @@ SPEC = NodeSpec(
               "line, arc, polyline, spline, circle); '' = the circle of the path_* parameters. "
               'The path of the built-in profile and of plans that carry no path of their '
               'own (a plan from the planner carries its path)'),
-        Param('auto_enable', True, '', 'at start-up only: start moving once a profile '
-              'exists, the joint states have been steady for auto_enable_settle_s and '
-              'torque_command has a subscriber (once; later motions need ~/enable)'),
+        Param('auto_enable', False, '', 'off: nothing moves until ~/enable. On: at start-up '
+              'only, start moving once a profile exists, the joint states have been steady '
+              'for auto_enable_settle_s and torque_command has a subscriber (once; later '
+              'motions need ~/enable)'),
         Param('auto_enable_settle_s', 0.25, 's', 'auto_enable: joint states without a gap of '
               'more than 3 periods for this long first, and torque_command subscribed for '
               'this long (real time only; 0 with use_sim_time)'),
@@ -134,16 +138,28 @@ SPEC = NodeSpec(
               '(latched), by its stamp')),
     services=(Topic('~/enable', 'std_srvs/Trigger', 'start: ramp to the (pending) profile; '
                     'clears a latched stop'),
-              Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop')),
-    example='ros2 run irb_control pdplus\n'
-            'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none '
-            '-p auto_enable:=false')
+              Topic('~/stop', 'std_srvs/Trigger', 'latched safe stop'),
+              Topic('~/hold', 'std_srvs/Trigger', 'controlled stop: a motion decelerates '
+                    'along its own path/profile, then holds the pose, motors on (HOLD, no '
+                    'latched error); refused while idle or stopped'),
+              Topic('~/power_brakes', 'std_srvs/Trigger', 'power mode: brakes engaged, '
+                    'motors off (only at rest: idle, or holding still); the drive\'s '
+                    '<source>/power_brakes does it'),
+              Topic('~/power_bus_off', 'std_srvs/Trigger', 'power mode: brakes, DC bus off '
+                    '(at rest)'),
+              Topic('~/power_hibernate', 'std_srvs/Trigger', 'power mode: hibernate (at '
+                    'rest)'),
+              Topic('~/power_hold', 'std_srvs/Trigger', 'power mode hold: drives on, the '
+                    'pose the brakes held is held by the motors (its gravity torque acts '
+                    'before the brakes open); enable is refused until then')),
+    example='ros2 run irb_control pdplus    # then: ros2 run irb_bringup ctl enable\n'
+            'ros2 run irb_control pdplus --ros-args -p builtin_profile:=none')
 
 
 class PdPlusNode(Node):
     """Subscribes /joint_states and /planned_trajectory; publishes /torque_command
     (sensor_msgs/JointState, effort [N m], stamp = the answered state's stamp) and
-    /controller_state; services ~/enable and ~/stop (std_srvs/Trigger)."""
+    /controller_state; services ~/enable, ~/stop and ~/hold (std_srvs/Trigger)."""
 
     def __init__(self, **kwargs):
         super().__init__('pdplus', **kwargs)
@@ -173,6 +189,12 @@ class PdPlusNode(Node):
             theta_max_lead_rad=P['theta_max_lead_rad'])
         friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
         self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
+        # profiles let go of (a plan replaced, the old motion at enable) are freed on a thread
+        # of their own, in slices: dropped on the control thread, a 20 000-point profile held
+        # the interpreter lock for 9-11 ms (one unanswered state at enable)
+        self._retired: queue.SimpleQueue = queue.SimpleQueue()
+        self.ctrl.retire = self._retired.put
+        threading.Thread(target=self._dispose_loop, name='pdplus_dispose', daemon=True).start()
         self.time_driven = P['reference_mode'] == 'time'
         self._set_builtin_profile()
         sim_time = self.get_parameter('use_sim_time').value
@@ -198,8 +220,17 @@ class PdPlusNode(Node):
         self.plans_accepted = self.plans_refused = 0
         self.create_service(Trigger, '~/enable', self.on_enable)
         self.create_service(Trigger, '~/stop', self.on_stop)
+        self.create_service(Trigger, '~/hold', self.on_hold)
+        # power modes: pdplus asks the drive (simulator or bridge: <axis_status.source>/
+        # power_<mode>) and follows it; None = never asked (the drive's own default)
+        self.drive_mode: str | None = None
+        self._drive_clients: dict = {}
+        for mode in POWER_MODES:
+            self.create_service(Trigger, f'~/power_{mode}',
+                                lambda req, resp, mode=mode: self.on_power_mode(mode, resp))
         self._names = list(self.model.joint_names)
         self._last_q = None                     # the last measured pose (ramp check)
+        self._last_qd = None                    # ... and speed (brakes only at rest)
         self._name_key: tuple | None = None     # names of the last joint state ...
         self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
@@ -236,6 +267,14 @@ class PdPlusNode(Node):
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
             f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")
+
+    def _dispose_loop(self) -> None:
+        while True:
+            obj = self._retired.get()
+            if obj is None:
+                return
+            dispose_sliced(obj)
+            del obj
 
     def _set_builtin_profile(self) -> None:
         P = self.P
@@ -275,14 +314,14 @@ class PdPlusNode(Node):
             self.log.warn(f'joint_states refused: {exc}', throttle_s=1.0)
             return
         q, qd = self._select(names, position, velocity)
-        self._last_q = q
+        self._last_q, self._last_qd = q, qd
         self._on_sample(t_in, sec, nanosec, q, qd)
 
     def on_state(self, msg: JointState) -> None:
         """The same for a JointState message object."""
         t_in = time.perf_counter()
         q, qd = self._select(tuple(msg.name), msg.position, msg.velocity)
-        self._last_q = q
+        self._last_q, self._last_qd = q, qd
         self._on_sample(t_in, msg.header.stamp.sec, msg.header.stamp.nanosec, q, qd)
 
     def _on_sample(self, t_in: float, sec: int, nanosec: int, q, qd) -> None:
@@ -472,7 +511,9 @@ class PdPlusNode(Node):
             self.get_logger().error(f'planned_trajectory refused: {status.reason}')
         status.accepted_count, status.refused_count = self.plans_accepted, self.plans_refused
         status.header.stamp = self.get_clock().now().to_msg()
-        self.last_plan = result
+        old, self.last_plan = self.last_plan, result
+        if old is not None:
+            self._retired.put(old)       # freed on the disposal thread
         self.pub_plan_status.publish(status)
 
     def on_gate_exit(self, text: str) -> None:
@@ -499,6 +540,9 @@ class PdPlusNode(Node):
         if self.axis is not None and self.axis.error:
             return False, (f'{self.axis.source} reports error {self.axis.error:#x} '
                            f'({self.axis.error_text}): reset it first')
+        if self.drive_mode not in (None, 'hold'):
+            return False, (f'the drives are in power mode {self.drive_mode}: ~/power_hold '
+                           'first')
         with self._lock:
             prof = self.ctrl.profile
             if prof is not None and self._last_q is not None:
@@ -530,9 +574,78 @@ class PdPlusNode(Node):
         self.log.warn('stop service: safe stop latched')
         return response
 
+    def on_hold(self, request, response):
+        """Controlled stop (PdPlusController.hold): the step decelerates the reference along
+        itself and then holds; a latched stop is never cleared by it."""
+        self._auto_enable_pending = False
+        with self._lock:
+            mode = self.ctrl.mode
+            response.success, response.message = self.ctrl.hold()
+        text = f'hold ({MODE_NAMES[mode]}): {response.message}'
+        if response.success:
+            self.log.info(text)
+        else:
+            self.log.warn(text)
+        return response
+
+    def on_power_mode(self, mode: str, response):
+        """A power mode for the drives (issue 29): deeper modes only at rest (checked here,
+        then the drive engages its brakes and pdplus stops commanding); hold: the drive powers
+        up and pdplus holds the measured pose. The drive's answer arrives later (logged)."""
+        self._auto_enable_pending = False
+        ok, text = self._power_mode_request(mode)
+        response.success, response.message = ok, text
+        (self.log.info if ok else self.log.warn)(f'power_{mode}: {text}')
+        return response
+
+    def _power_mode_request(self, mode: str) -> tuple[bool, str]:
+        if self.axis is None:
+            return False, 'no axis status yet: no drive to switch'
+        if mode != 'hold':
+            with self._lock:
+                qd = self._last_qd if self._last_qd is not None else _NAN3
+                ok, why = self.ctrl.motors_off(np.asarray(qd, float), dry_run=True)
+            if not ok:
+                return False, why
+        elif self.drive_mode in (None, 'hold'):
+            return True, 'the drives are in hold already'
+        name = f'{self.axis.source}/power_{mode}'
+        client = self._drive_clients.get(name)
+        if client is None:
+            client = self._drive_clients[name] = self.create_client(Trigger, name)
+        if not client.service_is_ready():
+            return False, f'the drive offers no {name} service'
+        fut = client.call_async(Trigger.Request())
+        fut.add_done_callback(lambda f: self._power_mode_done(mode, name, f))
+        return True, f'{mode} requested from {name}'
+
+    def _power_mode_done(self, mode: str, name: str, fut) -> None:
+        """The drive's answer: on success pdplus follows (motors off: IDLE; hold: HOLD the
+        measured pose)."""
+        try:
+            r = fut.result()
+        except Exception as exc:  # noqa: BLE001 - a failed call is logged, nothing changes
+            self.log.error(f'power_{mode}: {name} failed: {exc}')
+            return
+        if not r.success:
+            self.log.error(f'power_{mode}: {name} refused: {r.message}')
+            return
+        with self._lock:
+            if mode == 'hold':
+                q = self._last_q
+                ok, why = (self.ctrl.motors_on(np.asarray(q, float)) if q is not None
+                           else (False, 'no joint state yet'))
+            else:
+                qd = self._last_qd if self._last_qd is not None else _NAN3
+                ok, why = self.ctrl.motors_off(np.asarray(qd, float))
+            self.drive_mode = mode
+        text = f'power mode {mode} ({name}: {r.message}); pdplus: {why}'
+        (self.log.info if ok else self.log.error)(text)
+
     def destroy_node(self):
         self.log.flush(2.0)
         self._closing.set()
+        self._retired.put(None)
         self.gate.stop()
         return super().destroy_node()
 

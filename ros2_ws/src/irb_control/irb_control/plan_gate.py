@@ -128,10 +128,12 @@ def profile_from_result(result: dict, sliced: bool = False):
     """The controller's profile object from a gate result (in pdplus). ``sliced``: built in
     small pieces that let other threads run in between (``profiles.build_sliced``): pdplus's
     reader thread must not hold the interpreter lock for milliseconds while the control
-    thread waits for it."""
+    thread waits for it; its new objects frozen for the garbage collector before it runs
+    again."""
     from .profiles import PathProfile, TimeTrajectory, build_sliced
     cls = TimeTrajectory if result['kind'] == 'time' else PathProfile
-    return build_sliced(cls, result['arrays']) if sliced else cls(**result['arrays'])
+    return (build_sliced(cls, result['arrays'], freeze=True) if sliced
+            else cls(**result['arrays']))
 
 
 # --- the parent's side ----------------------------------------------------------------------

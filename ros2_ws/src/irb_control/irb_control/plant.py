@@ -21,6 +21,17 @@ held constant over the period. Brakes: the robot starts on its brakes and the fi
 releases them. Once commanded, no command for longer than ``command_timeout_s`` engages the
 brakes (applied torque 0, velocity 0, position held) and *latches* the error, like the axis
 computer: every command is ignored until ``clear_error()`` (the simulator's ~/reset).
+Brakes as a mode (issue 29): with ``brake_torque_nm`` set, an engaged brake is one more dry
+friction element of the joint: the joint stays put while the torque needed to hold it is within
+the brake torque (plus its static friction), no motor torque needed; beyond, it slips against
+it. A command whose torque acts releases the brakes only after ``brake_release_s`` of torque
+against the closed brake (the brake's opening time): whatever the controller commands then
+(the gravity torque) already acts when the joint comes free. This applies to brakes engaged
+on purpose (at start, by a power mode, by a fault); after a single period without a command in
+a motion the brakes open again at once, as before. ``request_power_mode`` changes the
+drives' power mode (``POWER_MODES``: hold = motors on; brakes, bus_off, hibernate = brakes
+engaged, torque off, commands ignored until hold is requested); a change takes its transition
+time. Without ``brake_torque_nm`` (None) the brakes hold any torque exactly (the former model).
 Sensors: encoder-like joint measurement (quantisation + Gaussian noise) each period, and a
 camera that samples the TCP position every ``camera_period_s`` with ``camera_noise_m`` noise
 (per axis).
@@ -47,6 +58,8 @@ from irb_description.model import RobotModel
 from .plant_effects import EffectsRuntime, PlantEffects
 
 PERIOD_S = 0.004032
+#: the drives' power modes, shallowest first (irb_description.power_modes.MODES)
+POWER_MODES = ('hold', 'brakes', 'bus_off', 'hibernate')
 
 
 @dataclass(frozen=True)
@@ -85,6 +98,24 @@ def load_plant_friction(path: str | Path, joint_names: list[str]) -> tuple[Frict
     return fm, PlantFriction.from_map(fm)
 
 
+def load_plant_brakes(path: str | Path | None) -> dict:
+    """The ``brakes:`` section of a plant YAML as PlantConfig fields
+    (``brake_torque_nm``, ``brake_release_s``); {} when the file has none (ideal brakes)."""
+    if not path:
+        return {}
+    data = yaml.safe_load(Path(path).read_text())
+    b = data.get('brakes') if isinstance(data, dict) else None
+    if b is None:
+        return {}
+    try:
+        torque = tuple(float(x) for x in b['torque_nm'])
+        release = float(b.get('release_s', 0.0))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f'{path}: brakes needs torque_nm (3 numbers) and release_s: '
+                         f'{exc}') from None
+    return {'brake_torque_nm': torque, 'brake_release_s': release}
+
+
 def default_plant_yaml() -> Path:
     """config/plant.yaml of this package (source tree or installed share directory)."""
     return config_path('plant.yaml')
@@ -115,6 +146,8 @@ class PlantConfig:
     camera_noise_m: float = 37e-6
     seed: int = 1
     gs_iterations: int = 30
+    brake_torque_nm: tuple | None = None  # holding torque per joint; None = holds any torque
+    brake_release_s: float = 0.0          # torque acts this long on the closed brake first
 
     def __post_init__(self):
         if not (self.period_s > 0 and self.substeps >= 1 and self.delay_samples >= 1):
@@ -124,6 +157,12 @@ class PlantConfig:
                 *self.initial_q]
         if not np.all(np.isfinite(vals)) or min(vals[:6]) < 0 or self.camera_period_s <= 0:
             raise ValueError(f'plant settings must be finite and >= 0: {self}')
+        if self.brake_torque_nm is not None:
+            b = np.asarray(self.brake_torque_nm, float)
+            if b.shape != (3,) or not np.all(np.isfinite(b)) or np.any(b <= 0):
+                raise ValueError(f'brake_torque_nm must be 3 finite numbers > 0, got {b}')
+        if not (math.isfinite(self.brake_release_s) and self.brake_release_s >= 0):
+            raise ValueError(f'brake_release_s must be >= 0, got {self.brake_release_s}')
 
 
 @dataclass
@@ -185,6 +224,16 @@ class Plant:
         self._last_command_t = -math.inf
         self.applied = np.zeros(3)
         self.braked = True
+        self.power_mode = 'brakes'   # settled power mode of the drives (POWER_MODES)
+        self.mode_target: str | None = None     # a change under way: target ...
+        self._mode_done_t = 0.0                 # ... reached at this time [s]
+        self._auto_hold = True       # a command switches brakes -> hold (no explicit request)
+        self._release_t: float | None = None    # the brakes open at this time [s]
+        # the opening time applies to brakes engaged on purpose (start, power mode, fault),
+        # not to a period without a command in the middle of a motion (released at once, as
+        # before: the drive holds on; its timeout is what engages the brakes for good)
+        self._slow_release = True
+        self.rejected_mode = 0       # commands ignored because the motors were off
         self.error = ''              # latched fault ('' = none): commands ignored until cleared
         self.friction_torque = np.zeros(3)
         self._tau_t = [0.0, 0.0, 0.0]
@@ -203,6 +252,53 @@ class Plant:
             self.events.append((self.state.t, f'error reset: {was}'))
         return was
 
+    def request_power_mode(self, mode: str, duration_s: float = 0.0) -> tuple[bool, str]:
+        """Change the drives' power mode (the axis computer's mode interface); the change
+        takes ``duration_s`` [s] of plant time (the transition). Deeper modes engage the
+        brakes at once and switch the torque off; commands are ignored until hold is
+        requested again. Refused while a change is under way, and hold while an error is
+        latched. (ok, text)"""
+        if mode not in POWER_MODES:
+            return False, f'unknown power mode {mode!r} (one of {list(POWER_MODES)})'
+        t = self.state.t
+        if self.mode_target is not None:
+            return False, (f'a change to {self.mode_target} is under way (done at t = '
+                           f'{self._mode_done_t:.3f} s)')
+        if mode == self.power_mode:
+            self._auto_hold = mode == 'hold'       # asked for: no command powers them on
+            return True, f'already in {mode}'
+        if mode == 'hold' and self.error:
+            return False, f'error latched ({self.error}): reset first'
+        if mode != 'hold':
+            self.braked = True
+            self._slow_release = True
+            self._release_t = None
+            self._latest = None
+            self._pipeline = deque([None] * self.config.delay_samples)
+            self.applied = np.zeros(3)
+            self._auto_hold = False
+        self.mode_target = mode
+        self._mode_done_t = t + max(float(duration_s), 0.0)
+        self.events.append((t, f'power mode {self.power_mode} -> {mode} requested '
+                               f'({duration_s:.3f} s)'))
+        self._settle_mode()
+        return True, f'{self.power_mode} -> {mode}' + (
+            f' in {duration_s:.3f} s' if self.mode_target is not None else '')
+
+    @property
+    def motors_off_requested(self) -> bool:
+        """The motors are off on request (a deeper mode, or a change under way): no
+        command is expected."""
+        return (self.mode_target is not None) or (self.power_mode != 'hold'
+                                                  and not self._auto_hold)
+
+    def _settle_mode(self) -> None:
+        if self.mode_target is not None and self.state.t >= self._mode_done_t - 1e-12:
+            self.events.append((self.state.t, f'power mode {self.mode_target} reached'))
+            self.power_mode, self.mode_target = self.mode_target, None
+            if self.power_mode == 'hold':
+                self._auto_hold = True
+
     def command(self, tau: np.ndarray) -> None:
         """Hand over the torque command (3,) [N m] answering the latest measurement.
 
@@ -215,6 +311,14 @@ class Plant:
         if self.error:
             self.rejected_latched += 1
             return
+        if self.power_mode != 'hold' or self.mode_target is not None:
+            if self._auto_hold and self.power_mode == 'brakes' and self.mode_target is None:
+                # the first torque command powers the drives (as before power modes existed)
+                self.events.append((self.state.t, 'power mode brakes -> hold (a command)'))
+                self.power_mode = 'hold'
+            else:
+                self.rejected_mode += 1
+                return
         self._latest = tau.copy()
         self._last_command_t = self.state.t
 
@@ -254,6 +358,7 @@ class Plant:
         """Advance one period: update the command pipeline and brakes, integrate substeps."""
         c = self.config
         s = self.state
+        self._settle_mode()
         stale = s.t - self._last_command_t > c.command_timeout_s + 1e-9
         if stale and self._latest is not None:
             self.error = (f'no command for {s.t - self._last_command_t:.4f} s '
@@ -262,16 +367,28 @@ class Plant:
                                      'until reset'))
             self._latest = None
             self._pipeline = deque([None] * c.delay_samples)
+            self.power_mode = 'brakes'           # power stages off on a fault
+            self._slow_release = True
         self._pipeline.append(self._latest)
         applied = self._pipeline.popleft()
         if applied is None:
             if not self.braked:
                 self.braked = True
+            self._release_t = None
             self.applied = np.zeros(3)
         else:
             if self.braked:
-                self.events.append((s.t, 'command received: brakes released'))
-                self.braked = False
+                if self._release_t is None:      # torque on the closed brake from now on
+                    self._release_t = s.t + (c.brake_release_s if self._slow_release
+                                             else 0.0)
+                if s.t >= self._release_t - 1e-12:
+                    self.events.append((s.t, 'command received: brakes released'
+                                        + (f' after {c.brake_release_s:.3f} s of torque'
+                                           if c.brake_release_s and self._slow_release
+                                           else '')))
+                    self.braked = False
+                    self._release_t = None
+                    self._slow_release = False
             self.applied = applied
         t0 = s.t
         tau = self.applied.tolist()
@@ -285,6 +402,7 @@ class Plant:
                 self._camera(q_prev)
         s.t = t0 + c.period_s
         self.steps += 1
+        self._settle_mode()
 
     def _substep(self, tau: list) -> None:
         """One semi-implicit Euler substep of h [s]; tau (3,) list [N m].
@@ -295,7 +413,8 @@ class Plant:
         the generic active-set solver ``_solve_dry_friction``)."""
         s = self.state
         h = self._h
-        if self.braked:
+        brake = self.config.brake_torque_nm if self.braked else None
+        if self.braked and brake is None:       # an ideal brake: holds any torque
             s.qd = np.zeros(3)
             self.friction_torque = np.zeros(3)
             s.t += h
@@ -332,6 +451,8 @@ class Plant:
         bd2 = fc2 + dfs2 * exp(-(v2 / vs2) ** 2)
         if fx is not None and fx.stribeck is not None:
             bd0, bd1, bd2 = fx.dry_level(vl, [bd0, bd1, bd2])
+        if brake is not None:      # an engaged brake: one more dry-friction element
+            bd0, bd1, bd2 = bd0 + brake[0], bd1 + brake[1], bd2 + brake[2]
         # fast path of the active-set solver: every joint slides on its own and keeps the
         # direction of its free velocity with lambda_i = sign(vf_i) F_i (the first pattern
         # ``_solve_dry_friction`` tries, accepted there under exactly the same test)

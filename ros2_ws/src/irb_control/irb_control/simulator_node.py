@@ -35,8 +35,8 @@ from std_srvs.srv import Trigger
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import (REALTIME_PARAMS, LogThread, apply_realtime, declare_realtime,
                         fifo_refusal, make_executor, short_switch_interval)
-from .plant import (Plant, PlantConfig, config_path, default_plant_yaml,
-                    load_plant_friction)
+from .plant import (POWER_MODES, Plant, PlantConfig, config_path, default_plant_yaml,
+                    load_plant_brakes, load_plant_friction)
 from .plant_effects import load_plant_effects
 
 
@@ -103,7 +103,15 @@ SPEC = NodeSpec(
         Topic('camera/tcp', 'geometry_msgs/PointStamped', 'TCP [m], 100 Hz'),
         Topic('axis_status', 'irb_interfaces/AxisStatus', 'drives: brakes, latched errors'),
         Topic('/clock', 'rosgraph_msgs/Clock', 'simulated time (paced and lockstep)')),
-    services=(Topic('~/reset', 'std_srvs/Trigger', 'clear a latched error'),),
+    services=(Topic('~/reset', 'std_srvs/Trigger', 'clear a latched error'),
+              Topic('~/power_hold', 'std_srvs/Trigger', 'drives on (brakes open once a '
+                    'command has acted for the brake release time)'),
+              Topic('~/power_brakes', 'std_srvs/Trigger', 'brakes engaged, power stages off'),
+              Topic('~/power_bus_off', 'std_srvs/Trigger', 'brakes engaged, DC bus off'),
+              Topic('~/power_hibernate', 'std_srvs/Trigger', 'controller hibernating, bus off, '
+                    'brakes engaged (each change takes its transition time of '
+                    'irb_description power_modes.yaml; the mode powers are in '
+                    'electrical_power)')),
     example='ros2 run irb_control simulator\n'
             'ros2 run irb_control simulator --ros-args -p mode:=realtime -p '
             'realtime_priority:=20')
@@ -145,7 +153,7 @@ class SimulatorNode(Node):
             position_noise_rad=p['position_noise_rad'],
             velocity_noise_rad_s=p['velocity_noise_rad_s'],
             camera_period_s=p['camera_period_s'], camera_noise_m=p['camera_noise_m'],
-            seed=p['seed'])
+            seed=p['seed'], **load_plant_brakes(ffile))
         effects = load_plant_effects(p['plant_effects_file'] or ffile)
         self.plant = Plant(model, friction, self.config, effects)
         self.lockstep = self.mode in ('lockstep', 'paced')
@@ -154,6 +162,14 @@ class SimulatorNode(Node):
                            else load_electrical(Path(efile)).axes(len(self.joint_names)))
         self.pub_power = (self.create_publisher(JointState, 'electrical_power', state_pub_qos())
                           if self.electrical is not None else None)
+        # the drives' power modes (irb_description.power_modes, on the plant's own electrical
+        # model): their input power in electrical_power, their transition times in the plant
+        from irb_description.power_modes import load_power_modes
+        self.power_modes = (load_power_modes(electrical=self.electrical)
+                            if self.electrical is not None else None)
+        for mode in POWER_MODES:
+            self.create_service(Trigger, f'~/power_{mode}',
+                                lambda req, resp, mode=mode: self.on_power_mode(mode, resp))
         self._power_names = list(self.joint_names) + [f'total_{m}' for m in BUS_MODES]
         self.pub_state = self.create_publisher(JointState, 'joint_states', state_pub_qos())
         self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
@@ -257,6 +273,34 @@ class SimulatorNode(Node):
         self._status(force=True)
         return response
 
+    def on_power_mode(self, mode: str, response):
+        """The drives' power mode (as the axis computer's mode interface): the change takes
+        the transition time of power_modes.yaml in simulated time; logged."""
+        pl = self.plant
+        dur = (self.power_modes.transition(pl.power_mode, mode).duration_s
+               if self.power_modes is not None and mode != pl.power_mode else 0.0)
+        response.success, response.message = pl.request_power_mode(mode, dur)
+        (self.get_logger().info if response.success else self.get_logger().warn)(
+            f'power mode {mode}: {response.message}')
+        self._status(force=True)
+        return response
+
+    def _mode_power(self, tau) -> float | None:
+        """Input power [W] of the drives while not in plain hold: a deeper mode's, or a
+        transition's energy spread over its duration; None in hold (the electrical model)."""
+        pl, pm = self.plant, self.power_modes
+        if pm is None:
+            return None
+        if pl.mode_target is not None:
+            from irb_description.power_modes import holding_power_w
+            hp = holding_power_w(self.electrical, tau)
+            tr = pm.transition(pl.power_mode, pl.mode_target, hp)
+            return tr.energy_j / tr.duration_s if tr.duration_s > 0 else pm.power_w(
+                pl.mode_target, hp)
+        if pl.power_mode == 'hold':
+            return None
+        return pm.power_w(pl.power_mode)
+
     def _status(self, force: bool = False) -> None:
         """axis_status on every change of brakes/error and every status_period_s."""
         p = self.plant
@@ -283,8 +327,13 @@ class SimulatorNode(Node):
         self.pub_state.publish(data)
         if self.pub_power is not None:
             e, qd = self.electrical, self.plant.state.qd
-            pax = e.axis_power(y.tau, qd)
-            tot = [float(e.power(y.tau, qd, m)) for m in BUS_MODES]
+            other = self._mode_power(y.tau)
+            if other is None:
+                pax = e.axis_power(y.tau, qd)
+                tot = [float(e.power(y.tau, qd, m)) for m in BUS_MODES]
+            else:       # a deeper power mode or a transition: the mode's input power
+                pax = np.zeros(len(self.joint_names))
+                tot = [float(other)] * len(BUS_MODES)
             msg = JointState(name=self._power_names, effort=pax.tolist() + tot)
             msg.header.stamp = stamp
             self.pub_power.publish(msg)
@@ -323,7 +372,9 @@ class SimulatorNode(Node):
                 stamp = _stamp(t)
                 self.pub_clock.publish(Clock(clock=stamp))
                 self._publish_state(stamp)
-                deadline = time.monotonic() + self.p['lockstep_wait_s']
+                # nobody answers while the drives are switched off on purpose: no wait
+                deadline = time.monotonic() + (0.0 if self.plant.motors_off_requested
+                                               else self.p['lockstep_wait_s'])
                 while self._answered_k != self._k and running(self.context):
                     left = deadline - time.monotonic()
                     if left <= 0:

@@ -140,14 +140,15 @@ def _data_path_once(retries):
 def _data_path(graph, retries):
     graph.start('axis', 'fake_axis_computer', 'miss_limit:=25')
     graph.start('bridge', 'axis_bridge')
-    # auto_enable starts the ramp once the joint states have been steady for
-    # auto_enable_settle_s and torque_command has a subscriber (the bridge). Without that
-    # gate about one start in twenty ended in a correct, latched safe stop: a 17 ms gap while
+    # auto_enable (on here; off by default) starts the ramp once the joint states have been
+    # steady for auto_enable_settle_s and torque_command has a subscriber (the bridge). Without
+    # that gate about one start in twenty ended in a correct, latched safe stop: a 17 ms gap while
     # DDS discovery was still going on (watchdog), or commands nobody received yet (the axis
     # computer braked).
     graph.procs['pdplus'] = subprocess.Popen(
         ['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-r', f'__ns:={graph.ns}',
-         '-p', 'profile_duration_s:=10.0', '-p', 'watchdog_missed_samples:=25'],
+         '-p', 'profile_duration_s:=10.0', '-p', 'watchdog_missed_samples:=25',
+         '-p', 'auto_enable:=true'],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     states = []
     graph.node.create_subscription(ControllerState, f'{graph.ns}/controller_state',

@@ -7,7 +7,8 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from irb_control.axis_bridge_core import BridgeCore
-from irb_control.axis_protocol import (COMMAND_SIZE, CYCLE_S, MODE_IDLE, STATE_SIZE,
+from irb_control.axis_protocol import (BRAKE_ENGAGE, COMMAND_SIZE, CYCLE_S, MODE_IDLE,
+                                       POWER_CODES, POWER_NONE, STATE_SIZE, STATE_SIZE_V2,
                                        CommandPacket, ProtocolError, StatePacket, decode_command,
                                        SequenceTracker, decode_state, encode_command,
                                        encode_state, seq_newer)
@@ -19,7 +20,8 @@ def state(seq, q0=0.1, session=77):
 
 
 def test_layout_sizes_are_fixed():
-    assert STATE_SIZE == 24 + 18 * 8 + 4 + 4 == 176
+    assert STATE_SIZE == 24 + 18 * 8 + 4 + 4 + 4 == 180       # version 3
+    assert STATE_SIZE_V2 == 24 + 18 * 8 + 4 + 4 == 176
     assert COMMAND_SIZE == 24 + 6 * 8 + 4 + 4 == 80
     assert len(encode_state(state(1))) == STATE_SIZE
     assert len(encode_command(CommandPacket(1, 0, np.ones(6)))) == COMMAND_SIZE
@@ -29,7 +31,7 @@ def test_state_round_trip_and_little_endian_header():
     p = state(0xFFFFFFF0)
     data = encode_state(p)
     assert data[:4] == b'IRBS'
-    assert struct.unpack_from('<H', data, 4)[0] == 2            # version, little-endian
+    assert struct.unpack_from('<H', data, 4)[0] == 3            # version, little-endian
     assert struct.unpack_from('<I', data, 12)[0] == 77          # session
     assert struct.unpack_from('<I', data, 8)[0] == 0xFFFFFFF0   # sequence number
     back = decode_state(data)
@@ -205,3 +207,36 @@ def test_sequence_tracker_window_and_resync_after_a_real_gap():
     assert tr.offer(5, 2002) == 'resync'
     assert tr.offer(5, 2003) == 'accept'
     assert tr.offer(5, 2003 + 2 ** 31) == 'stale'
+
+
+# --- version 3: the power mode and the brakes (issue 29), version 2 still read --------------
+def test_version_3_carries_power_mode_and_brakes_both_ways():
+    p = state(5)
+    p.brakes_engaged, p.power_mode, p.motors_on = True, POWER_CODES['bus_off'], False
+    back = decode_state(encode_state(p))
+    assert back.version == 3 and back.brakes_engaged and back.power_mode == 3   # bus_off
+    c = CommandPacket(5, 0, np.zeros(6), MODE_IDLE, False, 77, BRAKE_ENGAGE,
+                      POWER_CODES['hibernate'])
+    data = encode_command(c)
+    assert len(data) == COMMAND_SIZE == 80                     # the reserved bytes used
+    assert struct.unpack_from('<BB', data, 74) == (BRAKE_ENGAGE, 4)
+    back = decode_command(data)
+    assert (back.brake_request, back.power_mode_request, back.version) == (1, 4, 3)
+
+
+def test_version_2_packets_are_still_read():
+    """A version-2 peer: its 176-byte state decodes (brakes = not motors_on, power mode
+    unknown), its command (reserved bytes 0) decodes as no request; and a version-2 encoder
+    writes exactly the version-2 layout."""
+    p = state(9)
+    p.version, p.motors_on = 2, False
+    data = encode_state(p)
+    assert len(data) == STATE_SIZE_V2 and struct.unpack_from('<H', data, 4)[0] == 2
+    back = decode_state(data)
+    assert back.version == 2 and back.brakes_engaged and back.power_mode == POWER_NONE
+    c = CommandPacket(9, 0, np.ones(6), 1, False, 77, BRAKE_ENGAGE, 2, version=2)
+    data = encode_command(c)
+    assert struct.unpack_from('<HH', data, 4)[0] == 2 and data[74:76] == b'\0\0'
+    back = decode_command(data)
+    assert (back.brake_request, back.power_mode_request, back.version) == (0, 0, 2)
+    assert_array_equal(back.tau_ref, np.ones(6))

@@ -1,7 +1,7 @@
 """Issue 32: the simulator's defaults work on an ordinary machine. `ros2 run irb_control
 simulator` and `pdplus` with nothing but a namespace: without real-time priority the simulator
 runs paced lockstep on /clock and says so in one line, pdplus follows /clock by itself, and the
-built-in circle runs without a stop (before: a watchdog stop 1.3 s after enabling at load
+built-in circle, started with ~/enable (nothing moves unless enabled), runs without a stop (before: a watchdog stop 1.3 s after enabling at load
 1.3 on 2 cores)."""
 import os
 import subprocess
@@ -42,8 +42,22 @@ def test_default_simulator_and_pdplus_run_without_a_stop():
             ex.spin_once(timeout_sec=0.05)
         return cond()
     try:
+        from std_srvs.srv import Trigger
+        enable = node.create_client(Trigger, f'{ns}/pdplus/enable')
+        assert enable.wait_for_service(timeout_sec=120), 'pdplus did not come up'
+        answers = []
+
+        def enabled():
+            """Call ~/enable until it is accepted (refused until the simulator's status has
+            arrived); True once accepted."""
+            if answers and answers[-1].done() and answers[-1].result().success:
+                return True
+            if not answers or answers[-1].done():
+                answers.append(enable.call_async(Trigger.Request()))
+            return False
+        assert until(enabled, 120), [a.result().message for a in answers if a.done()][-1:]
         stopped = [ControllerState.MODE_STOPPED]
-        # auto_enable starts the built-in circle; 2.5 s of simulated time on the path
+        # the built-in circle runs; 2.5 s of simulated time on the path
         assert until(lambda: any(s.mode == ControllerState.MODE_PATH for s in states)
                      or any(s.mode in stopped for s in states), 120), 'never reached the path'
         first = next(s for s in states if s.mode in (ControllerState.MODE_PATH, *stopped))

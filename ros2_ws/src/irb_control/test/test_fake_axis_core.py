@@ -228,3 +228,68 @@ def test_fault_config_validation():
         FaultConfig(drop=1.5)
     with pytest.raises(ValueError):
         FaultConfig(delay_s=-1.0)
+
+
+# --- issue 29: power modes and brakes through the protocol (version 3) ----------------------
+def _power(core, code, tau=None, brake=0):
+    from irb_control.axis_protocol import CommandPacket, encode_command
+    t = np.zeros(6)
+    if tau is not None:
+        t[:3] = tau
+    return core.on_datagram(encode_command(CommandPacket(core.seq, 0, t, MODE_TORQUE, False,
+                                                         SESSION, brake, code)), CONTROLLER)
+
+
+def test_power_modes_travel_in_the_command_and_come_back_in_the_state(model):
+    """brakes requested in a command: brakes engaged at once, torque off, later commands
+    ignored without a miss or an error; the states report brakes and mode; hold requested
+    again: after the transition the commanded torque acts on the closed brake for the
+    opening time, then the brakes open and the arm stays put (gravity torque commanded)."""
+    from irb_control.axis_protocol import POWER_CODES
+    from irb_control.plant import default_plant_yaml, load_plant_brakes
+    plant = Plant(model, PlantFriction.from_map(model.friction),
+                  PlantConfig(seed=3, **load_plant_brakes(default_plant_yaml())))
+    core = engaged(plant)
+    q0 = plant.state.q.copy()
+    core.begin_cycle()
+    assert not _power(core, POWER_CODES['brakes'], hold_torque(plant))
+    core.end_cycle()
+    for _ in range(50):                         # 0.2 s: torque commands, all ignored
+        (_, data), = core.begin_cycle()
+        s = decode_state(data)
+        assert not core.on_datagram(command(core.seq, hold_torque(plant)), CONTROLLER)
+        core.end_cycle()
+    assert s.brakes_engaged and not s.motors_on and s.power_mode == POWER_CODES['brakes']
+    assert core.error == ERR_NONE and core.missed_total == 0 and plant.braked
+    assert core.rejected['motors_off'] == 51            # the request's own torque + 50
+    core.transition_s = lambda a, b: 0.1        # hold takes 0.1 s here
+    core.begin_cycle()
+    _power(core, POWER_CODES['hold'], hold_torque(plant))
+    core.end_cycle()
+    opened = None
+    for k in range(100):
+        (_, data), = core.begin_cycle()
+        s = decode_state(data)
+        core.on_datagram(command(core.seq, hold_torque(plant)), CONTROLLER)
+        core.end_cycle()
+        if opened is None and not plant.braked:
+            opened = k
+    assert s.power_mode == POWER_CODES['hold'] and not s.brakes_engaged and s.motors_on
+    # opened after the transition (0.1 s) plus the opening time on the closed brake
+    assert opened * plant.config.period_s >= 0.1 + plant.config.brake_release_s - 0.01
+    assert core.error == ERR_NONE
+    assert np.max(np.abs(plant.state.q - q0)) < 1e-4          # nothing sagged
+
+
+def test_a_version_2_controller_still_drives_the_version_3_computer(plant):
+    from irb_control.axis_protocol import CommandPacket, encode_command
+    core = FakeAxisCore(plant, session=SESSION, controller=CONTROLLER)
+    for _ in range(10):
+        core.begin_cycle()
+        t = np.zeros(6)
+        t[:3] = hold_torque(plant)
+        v2 = encode_command(CommandPacket(core.seq, 0, t, MODE_TORQUE, False, SESSION,
+                                          version=2))
+        assert core.on_datagram(v2, CONTROLLER)
+        core.end_cycle()
+    assert core.engaged and core.error == ERR_NONE and not plant.braked

@@ -26,12 +26,15 @@ TIMEOUT = 30.0
 
 
 @pytest.fixture
-def graph():
+def graph(request):
+    """pdplus (auto_enable off, its default, unless the test passes True indirectly) and a
+    peer that reports the drives' status."""
+    auto = bool(getattr(request, 'param', False))
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
     ns = f'/t{uuid.uuid4().hex[:8]}'
     ctrl = PdPlusNode(context=ctx, namespace=ns, parameter_overrides=[
-        Parameter('executor', value='single')])
+        Parameter('executor', value='single'), Parameter('auto_enable', value=auto)])
     peer = rclpy.create_node('peer', namespace=ns, context=ctx)
     axis_ok(peer, ns)
     ex = SingleThreadedExecutor(context=ctx)
@@ -109,6 +112,8 @@ def test_command_answers_state_and_nan_is_rejected(graph):
     def publish(q):
         sent.append(joint_state(now_s(peer), q))
         pub.publish(sent[-1])
+    _until(ex, lambda: ctrl.axis is not None)          # pdplus enables only with a status
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
     fut = cmds.expect(lambda m: True)
     # publish until the (best-effort) subscription is matched and answered
     timer = peer.create_timer(T, lambda: publish(q0))
@@ -139,7 +144,8 @@ def test_stop_enable_services_and_watchdog(graph):
     ctrl, peer, ex, ns = graph
     q0 = ctrl.ctrl.start_pose()
     states = Collector(peer, ControllerState, f'{ns}/controller_state', state_qos())
-    Collector(peer, JointState, f'{ns}/torque_command', state_qos())    # auto_enable needs it
+    _until(ex, lambda: ctrl.axis is not None)          # pdplus enables only with a status
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
     timer = feed_joint_states(peer, ns, q0)
     spin_for(ex, states.expect(lambda m: m.mode == ControllerState.MODE_RAMP))
 
@@ -326,6 +332,7 @@ def test_delay_prediction_parameter_reaches_the_controller(tmp_path, value, path
         rclpy.try_shutdown(context=ctx)
 
 
+@pytest.mark.parametrize('graph', [True], indirect=True)       # auto_enable:=true
 def test_auto_enable_waits_for_a_steady_stream_and_a_command_subscriber(graph):
     """No ramp while torque_command has no subscriber (0.6 s of joint states); once one is
     matched, the ramp starts (the settle time, SettleGate, is tested in test_pd_plus)."""
@@ -535,3 +542,105 @@ def test_enable_is_refused_while_the_drives_report_an_error(timed):
     _until(ex, lambda: ctrl.axis is not None and ctrl.axis.error)
     resp = ctrl.on_enable(Trigger.Request(), Trigger.Response())
     assert not resp.success and 'reset it first' in resp.message
+
+
+def _call(ex, client):
+    """Call a Trigger service through the executor (a future, bounded)."""
+    assert client.wait_for_service(timeout_sec=TIMEOUT)
+    return spin_for(ex, client.call_async(Trigger.Request()))
+
+
+def test_hold_service_stops_along_the_profile_and_holds(timed):
+    """~/hold (issue 32): refused while idle; from a motion a controlled stop (no latched
+    error) into HOLD with the motors on; refused while stopped, and the stop stays latched."""
+    ctrl, peer, ex, ns = timed
+    ctrl.watchdog.timeout_s = 0.5      # the test steps a plant in Python between samples
+    from irb_control.closed_loop import build_default
+    plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
+    plant.reset(ctrl.ctrl.start_pose())
+    hold = peer.create_client(Trigger, f'{ns}/pdplus/hold')
+    r = _call(ex, hold)
+    assert not r.success and r.message.startswith('idle')
+    _until(ex, lambda: ctrl.axis is not None)
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode != ControllerState.MODE_TIME:
+        states = _drive(ctrl, None, 10, plant)
+    # into the motion (the states are stamped on the wall clock: bounded by count, not time)
+    for _ in range(200):
+        if np.max(np.abs(states[-1].qd_ref)) > 0.1:
+            break
+        states = _drive(ctrl, None, 5, plant)
+    assert states[-1].mode == ControllerState.MODE_TIME
+    assert np.max(np.abs(states[-1].qd_ref)) > 0.1
+    r = _call(ex, hold)
+    assert r.success and 'decelerating in' in r.message, r.message
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode == ControllerState.MODE_TIME:
+        states += _drive(ctrl, None, 10, plant)
+    assert states[-1].mode == ControllerState.MODE_HOLD, states[-1].stop_reason
+    held = np.array(states[-1].q_ref)
+    after = _drive(ctrl, None, 250, plant)               # 1 s held, motors on
+    assert {s.mode for s in after} == {ControllerState.MODE_HOLD}
+    assert all(np.array_equal(s.q_ref, held) for s in after) and not ctrl.ctrl.stop_reason
+    assert np.abs(plant.state.q - held).max() < 2e-3
+    # the sine had not ended: it stopped short of its end pose, on its way
+    assert np.abs(held - ctrl.ctrl.active.q[-1]).max() > 1e-3
+    r = _call(ex, hold)
+    assert r.success and r.message == 'already holding'
+    ctrl.on_stop(Trigger.Request(), Trigger.Response())
+    r = _call(ex, hold)
+    assert not r.success and 'latched' in r.message
+    states = _drive(ctrl, held, 20)
+    assert {s.mode for s in states} == {ControllerState.MODE_STOPPED}
+    assert states[-1].stop_reason == 'stop service' and not ctrl.pub_cmd.sent
+
+
+def test_power_modes_brakes_only_at_rest_and_hold_again_on_the_pose(timed):
+    """Issue 29: ~/power_<mode> asks the drive (<axis_status.source>/power_<mode>); brakes
+    only at rest (refused while moving, the drive not asked); once the drive has them pdplus
+    sends nothing and enable is refused; ~/power_hold: the drive is asked, then pdplus holds
+    the measured pose."""
+    ctrl, peer, ex, ns = timed
+    ctrl.watchdog.timeout_s = 0.5      # the test steps a plant in Python between samples
+    from irb_control.closed_loop import build_default
+    plant, _ = build_default(friction_mode='nominal', duration_s=10.0)
+    plant.reset(ctrl.ctrl.start_pose())
+    asked = []
+
+    def drive(mode):
+        def cb(req, resp):
+            asked.append(mode)
+            resp.success, resp.message = True, f'-> {mode}'
+            return resp
+        return cb
+    for mode in ('hold', 'brakes', 'bus_off', 'hibernate'):
+        peer.create_service(Trigger, f'{ns}/test/power_{mode}', drive(mode))
+    brakes = peer.create_client(Trigger, f'{ns}/pdplus/power_brakes')
+    power_hold = peer.create_client(Trigger, f'{ns}/pdplus/power_hold')
+    _until(ex, lambda: ctrl.axis is not None)
+    assert ctrl.on_enable(Trigger.Request(), Trigger.Response()).success
+    states = _drive(ctrl, None, 1, plant)
+    while states[-1].mode != ControllerState.MODE_TIME:
+        states = _drive(ctrl, None, 10, plant)
+    states = _drive(ctrl, None, 40, plant)
+    r = _call(ex, brakes)
+    assert not r.success and 'brakes only at rest' in r.message and asked == []
+    while states[-1].mode != ControllerState.MODE_HOLD:
+        states = _drive(ctrl, None, 25, plant)
+    states = _drive(ctrl, None, 250, plant)                # 1 s of holding: at rest
+    r = _call(ex, brakes)
+    assert r.success, r.message
+    _until(ex, lambda: ctrl.drive_mode == 'brakes')
+    assert asked == ['brakes'] and ctrl.ctrl.mode == ControllerState.MODE_IDLE
+    states = _drive(ctrl, None, 20, plant)
+    assert not ctrl.pub_cmd.sent and {s.mode for s in states} == {ControllerState.MODE_IDLE}
+    r = ctrl.on_enable(Trigger.Request(), Trigger.Response())
+    assert not r.success and '~/power_hold first' in r.message
+    q_here = np.array(ctrl._last_q)
+    assert _call(ex, power_hold).success
+    _until(ex, lambda: ctrl.drive_mode == 'hold')
+    assert asked == ['brakes', 'hold']
+    states = _drive(ctrl, q_here, 5)
+    assert {s.mode for s in states} == {ControllerState.MODE_HOLD} and ctrl.pub_cmd.sent
+    np.testing.assert_array_equal(states[-1].q_ref, q_here)

@@ -97,6 +97,7 @@ def test_electrical_power_from_the_plants_own_parameters(sim):
     from irb_control.plant import config_path
     sim.pub_state, sim.pub_power = _Capture(), _Capture()
     sim.plant.reset(np.array([0.0, 0.9, 0.25]), np.array([0.5, -0.4, 0.3]))
+    assert sim.plant.request_power_mode('hold')[0]       # motors on, as in a motion
     tau = np.array([120.0, 80.0, -40.0])
     sim.plant.measure = lambda: type('Y', (), {'q': sim.plant.state.q, 'tau': tau,
                                                'qd': sim.plant.state.qd})()
@@ -125,3 +126,53 @@ def test_electrical_power_from_the_plants_own_parameters(sim):
     assert m.effort[3] == pytest.approx(sb + sum(max(p, 0) for p in expect))
     assert m.effort[4] == pytest.approx(sb + max(sum(expect), 0))
     assert expect[1] < 0 < m.effort[4] < m.effort[3]   # axis 2 generates, shared recovers it
+
+
+def test_power_modes_in_electrical_power_and_their_transition_times(sim):
+    """Issue 29: each power mode's input power (irb_description power_modes on the plant's
+    electrical model) in electrical_power; a change takes its transition time in simulated
+    time, drawing the transition's energy meanwhile; modes changed by service, logged."""
+    from std_srvs.srv import Trigger
+    from irb_description.power_modes import load_power_modes
+    # the YAML's transitions (up to 45 s) shortened 20x: the same rules, 3 s simulated
+    pm = load_power_modes(electrical=sim.electrical).with_params(duration_factor=0.05)
+    sim.power_modes = pm
+    sim.pub_state, sim.pub_power = _Capture(), _Capture()
+    pl = sim.plant
+    pl.reset(np.array([0.0, 0.9, 0.25]))
+    seen = []
+    for mode in ('hold', 'brakes', 'bus_off', 'hibernate', 'hold'):
+        r = sim.on_power_mode(mode, Trigger.Response())
+        assert r.success, r.message
+        tr = pm.transition(seen[-1] if seen else 'brakes', mode)
+        t_end = pl.state.t + tr.duration_s
+        energy = 0.0
+        while pl.mode_target is not None:
+            sim._publish_state(_stamp(pl.state.t))
+            energy += sim.pub_power.sent[-1].effort[4] * pl.config.period_s
+            pl.step()
+        assert pl.power_mode == mode and pl.state.t == pytest.approx(t_end, abs=0.005)
+        assert pl.braked                               # no command yet: on its brakes
+        if mode != 'hold':
+            assert energy == pytest.approx(tr.energy_j, rel=0.01, abs=1.0)
+            sim._publish_state(_stamp(pl.state.t))
+            m = sim.pub_power.sent[-1]
+            assert list(m.effort[:3]) == [0.0, 0.0, 0.0]
+            assert m.effort[3:] == pytest.approx([pm.power_w(mode)] * 3)
+        seen.append(mode)
+    assert seen[-1] == 'hold' and pm.power_w('hibernate') < pm.power_w('brakes')
+
+
+def test_a_deeper_mode_ignores_commands_and_holds_the_arm_on_its_brakes(sim):
+    """Brakes engaged with the torque off: the arm stays where it is (the brake torques of
+    plant.yaml exceed gravity), commands are ignored (no error) until hold is asked for."""
+    pl = sim.plant
+    q0 = np.array([0.0, 0.9, 0.25])
+    pl.reset(q0)
+    assert pl.config.brake_torque_nm is not None      # plant.yaml's finite brakes
+    assert pl.request_power_mode('brakes', 0.0)[0]
+    for _ in range(250):                              # 1 s on the brakes, commands ignored
+        pl.command(np.array([0.0, 300.0, 0.0]))
+        pl.step()
+    assert pl.rejected_mode == 250 and not pl.error and pl.braked
+    np.testing.assert_array_equal(pl.state.q, q0)

@@ -127,25 +127,32 @@ def test_robot_follows_circle_across_processes(processes):
     assert ctrl.wait(timeout=20) == 0, ctrl.stdout.read()
 
 
-def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state(stall_retries):
+def test_a_stalled_pdplus_ends_latched_and_answers_no_old_state(stall_retries, tmp_path):
     """pdplus frozen for 1 s (SIGSTOP) in the middle of the path, then resumed: it must end
     in a latched stop (its own stall or the watchdog) and never answer the states that waited
     in its queue (issue 14, defect 3: it resumed silently in 5 of 7 runs, answering old
     states). Real time: simulator and pdplus on the steady clock. A stop from a stall of the
     machine before the freeze (the fresh-clone CI run of 2026-11-24: modes 4, 4, 4 with a
     40 ms watchdog) is correct but not the subject: the scenario runs again on fresh
-    processes (stall_retries)."""
-    stall_retries(lambda: _stall_once(stall_retries))
+    processes (stall_retries). Issue 32: checked on the simulator's side too, from its own
+    per-state record (when each state went out, whether and how late its answer was
+    applied): no command answering a state older than pdplus's watchdog limit acted on the
+    robot."""
+    stall_retries(lambda: _stall_once(stall_retries, tmp_path))
 
 
-def _stall_once(retries):
+def _stall_once(retries, tmp_path):
+    import json
     from std_srvs.srv import Trigger
     ns = f'/st{uuid.uuid4().hex[:8]}'
+    stats_path = tmp_path / f'sim_stats_{ns[1:]}.json'
+    limit_s = 10.5 * 0.004032          # pdplus's watchdog limit here (10 samples + 1/2)
     common = ['--ros-args', '-r', f'__ns:={ns}']
     # the subject is pdplus's own stall detection (its limits unchanged); the simulator's
     # command timeout is 10 cycles so that platform jitter before the freeze does not latch it
     sim = subprocess.Popen(['ros2', 'run', 'irb_control', 'simulator', *common,
-                            '-p', 'mode:=realtime', '-p', 'command_timeout_s:=0.04032'],
+                            '-p', 'mode:=realtime', '-p', 'command_timeout_s:=0.04032',
+                            '-p', f'stats_path:={stats_path}', '-p', 'stats_per_state:=true'],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     # pdplus's watchdog at 10 samples (40 ms): with 3, a platform stall during the ramp
@@ -213,3 +220,19 @@ def _stall_once(retries):
         rclpy.try_shutdown(context=ctx)
         _stop(ctrl)
         _stop(sim)
+    # the simulator's side (its statistics, written at its shutdown): every state it sent
+    # from just before the freeze to after the resume, and the answers it applied. An answer
+    # is applied only to the newest state sent; none may answer a state older than the limit
+    stats = json.loads(stats_path.read_text())
+    per_state = stats['per_state_monotonic_s_latency_ms']
+    around = [(t, lat) for t, lat in per_state if t_stop - 0.1 <= t <= t_cont + 0.1]
+    frozen = [lat for t, lat in around if t_stop + limit_s < t < t_cont]
+    assert len(frozen) > 200 and all(lat is None for lat in frozen), frozen[:5]
+    applied = [(t, lat) for t, lat in around if lat is not None]
+    assert all(lat < limit_s * 1e3 for _, lat in applied), max(applied, key=lambda x: x[1])
+    # nothing applied after the resume answers a state sent before it
+    assert not [t for t, lat in applied if t < t_cont and t + lat * 1e-3 > t_cont]
+    print(f"freeze {t_cont - t_stop:.3f} s: simulator states around it {len(around)}, "
+          f"answers applied {len(applied)} (max {max((x[1] for x in applied), default=0):.2f}"
+          f" ms after their state), refused as not answering the newest state "
+          f"{stats['stale_commands_ignored']} (whole run)")
