@@ -12,7 +12,7 @@ topics across a lossy network; its delivery latency and missing samples from its
 `hosts_0ms` (pdplus on a second host, veth link),
 `hosts_0ms_emulated` (the same through linkemu at 0 ms: the emulator's own cost, only where
 netem is missing), `hosts_1ms`, `hosts_5ms` (one-way delay on pdplus's link, each direction:
-the round trip grows by 2 x delay). pdplus runs its built-in 10 s circle (auto_enable). The
+the round trip grows by 2 x delay). pdplus runs its built-in 10 s circle (auto_enable:=true). The
 figures are the simulator's (its stats_path): latency of the command that answers each state,
 missed deadlines (no answer before the next tick), commands that came too late (stale).
 """
@@ -65,7 +65,8 @@ def _case(name, duration, rt, domain, tmp: Path) -> dict:
                                               stderr=subprocess.STDOUT,
                                               start_new_session=True))
             start(ctl, _ros2_run('irb_control', 'pdplus', {
-                'realtime_priority': rt, 'profile_duration_s': 10.0}), 'pdplus')
+                'realtime_priority': rt, 'profile_duration_s': 10.0,
+                'auto_enable': True}), 'pdplus')
             bag = None
             if name == 'same_host_remote_recorder':
                 cell.add_host('rec', delay_ms=REC_DELAY_MS, loss=REC_LOSS)

@@ -92,3 +92,23 @@ def test_help_prints_usage_and_does_nothing_else(pkg, exe, tmp_path):
     assert not written, f'{exe} --help wrote {sorted(written)[:5]}'
     assert not (tmp_path / 'roslog').exists(), f'{exe} --help started rclpy logging'
     assert _snapshot(*watched) == before, f'{exe} --help wrote into bags/ or runs/'
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('pkg,exe,args,words', [
+    ('irb_control', 'simulator', ['-p', 'mode:=bogus'], "mode must be one of"),
+    ('irb_control', 'pdplus', ['-p', 'kp:=abc'], "parameter 'kp'"),
+    ('irb_planning', 'planner', ['-p', 'grid_size:=abc'], "parameter 'grid_size'"),
+    ('irb_identification', 'replay', ['-p', 'rate:=fast'], "parameter 'rate'"),
+])
+def test_a_bad_parameter_is_one_line_and_a_non_zero_exit(pkg, exe, args, words, tmp_path):
+    """A value of the wrong type or one the node refuses: one line naming it, no traceback,
+    a non-zero exit, before anything runs."""
+    env = dict(os.environ, HOME=str(tmp_path), ROS_LOG_DIR=str(tmp_path / 'log'))
+    res = subprocess.run(['ros2', 'run', pkg, exe, '--ros-args', *args], cwd=tmp_path,
+                         env=env, capture_output=True, text=True, timeout=4 * BOUND_S)
+    text = res.stdout + res.stderr
+    assert res.returncode != 0, text
+    assert 'Traceback' not in text, text
+    line = [ln for ln in res.stderr.splitlines() if ln.strip()][-1]
+    assert line.startswith(f'{exe}: ') and words in line, text

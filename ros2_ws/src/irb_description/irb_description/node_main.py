@@ -38,15 +38,22 @@ def run_node(make_node, spin, args=None, spec=None) -> None:
         exit_if_help(args, spec)
     init(args)
     node = None
+    refused = ''
     try:
-        node, interrupted = build_node(make_node)
-        if not interrupted:
-            # everything built so far lives as long as the node: out of the collector's way,
-            # so that a full collection in the 248 Hz loop does not walk it (a few ms
-            # otherwise)
-            gc.collect()
-            gc.freeze()
-            spin(node)
+        try:
+            node, interrupted = build_node(make_node)
+        except _CONFIG_ERRORS as exc:
+            # a parameter of the wrong type, a value the node refuses, a file it cannot read:
+            # one line naming it, exit 2 (no traceback)
+            refused = _one_line(exc)
+        else:
+            if not interrupted:
+                # everything built so far lives as long as the node: out of the collector's
+                # way, so that a full collection in the 248 Hz loop does not walk it (a few ms
+                # otherwise)
+                gc.collect()
+                gc.freeze()
+                spin(node)
     except ExternalShutdownException:
         pass
     finally:
@@ -54,6 +61,25 @@ def run_node(make_node, spin, args=None, spec=None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if refused:
+        name = getattr(spec, 'executable', '') or Path(sys.argv[0]).name
+        print(f'{name}: {refused}', file=sys.stderr, flush=True)
+        sys.exit(2)
+
+
+def _config_errors() -> tuple:
+    from rclpy.exceptions import (InvalidParameterTypeException,
+                                  InvalidParameterValueException, ParameterException)
+    return (InvalidParameterTypeException, InvalidParameterValueException, ParameterException,
+            ValueError, FileNotFoundError)
+
+
+_CONFIG_ERRORS = _config_errors()
+
+
+def _one_line(exc: BaseException) -> str:
+    text = ' '.join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 400 else text[:397] + '...'
 
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -121,10 +147,34 @@ _ARRAY_TYPES = {'bool[]': Parameter.Type.BOOL_ARRAY, 'int[]': Parameter.Type.INT
                 'string[]': Parameter.Type.STRING_ARRAY}
 
 
+def coerce_overrides(node, params) -> None:
+    """Let a parameter take the types a user types: ``rate:=0`` for a double (an integer on
+    the command line), ``[1, 2]`` for a double array. rclpy refuses an INTEGER override of a
+    DOUBLE parameter (InvalidParameterTypeException); the override is converted to the
+    declared type before declaring."""
+    overrides = getattr(node, '_parameter_overrides', None)
+    if not overrides:
+        return
+    for p in params:
+        given = overrides.get(p.name)
+        if given is None:
+            continue
+        v = given.value
+        if isinstance(p.default, float) and isinstance(v, int) and not isinstance(v, bool):
+            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(v))
+        elif (isinstance(p.default, list) and p.default and isinstance(p.default[0], float)
+              and isinstance(v, (list, tuple)) and v
+              and all(isinstance(x, int) and not isinstance(x, bool) for x in v)):
+            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY,
+                                          [float(x) for x in v])
+
+
 def declare_params(node: Node, params, only=None) -> dict:
     """Declare every ``node_help.Param`` of ``params`` (a ``NodeSpec``'s ``params``) with its
     description and unit; {name: value} (the value given on the command line or in a params
-    file, else the default). ``only``: names to declare (None: all)."""
+    file, else the default; an integer given for a double is taken as that double).
+    ``only``: names to declare (None: all)."""
+    coerce_overrides(node, params)
     out = {}
     for p in params:
         if only is not None and p.name not in only:

@@ -57,32 +57,14 @@ def recording_qos(endpoints, depth: int = 10000) -> QoSProfile:
 
 
 def coerce_overrides(node, params) -> None:
-    """Let a parameter take the types a user types: ``rate:=0`` for a double (an integer on
-    the command line), ``[1, 2]`` for a double array. rclpy refuses an INTEGER override of a
-    DOUBLE parameter (InvalidParameterTypeException); the override is converted to the
-    declared type before declaring."""
-    from rclpy.parameter import Parameter
-    overrides = getattr(node, '_parameter_overrides', None)
-    if not overrides:
-        return
-    for p in params:
-        given = overrides.get(p.name)
-        if given is None:
-            continue
-        v = given.value
-        if isinstance(p.default, float) and isinstance(v, int) and not isinstance(v, bool):
-            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE, float(v))
-        elif (isinstance(p.default, list) and p.default and isinstance(p.default[0], float)
-              and isinstance(v, (list, tuple)) and v
-              and all(isinstance(x, int) and not isinstance(x, bool) for x in v)):
-            overrides[p.name] = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY,
-                                          [float(x) for x in v])
+    """``node_main.coerce_overrides`` (kept here for the package's callers)."""
+    from irb_description.node_main import coerce_overrides as coerce
+    coerce(node, params)
 
 
 def declare_params(node, params) -> dict:
-    """``node_main.declare_params`` after ``coerce_overrides``."""
+    """``node_main.declare_params`` (which coerces the overrides itself)."""
     from irb_description.node_main import declare_params as declare
-    coerce_overrides(node, params)
     return declare(node, params)
 
 
