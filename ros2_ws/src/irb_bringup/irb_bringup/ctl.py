@@ -10,9 +10,9 @@
                                         # then hold the pose (motors on, nothing latched)
     ros2 run irb_bringup ctl enable --wait   # enable, then wait until the motion it started
                                         # has ended (hold or idle); exit 1 if pdplus stops
-    ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (hold: after a
-                                        # motion; idle: as soon as pdplus is up and idle);
-                                        # exit 1 if it stops
+    ros2 run irb_bringup ctl wait path  # until pdplus is in that mode (at once if it is);
+                                        # exit 1 if it stops. To wait for a motion to end,
+                                        # use ctl enable --wait
 
 Exit codes: 0 done; 1 refused by the node (its message is printed); 2 node or service not
 there, or no answer within --timeout. Every wait is bounded. The text and the rates come from
@@ -43,8 +43,8 @@ def parse_args(argv):
                    '~/reset (and pdplus\'s, where it has one); wait MODE: until pdplus '
                    'reports MODE (idle, ramp, path, time, hold, stopped)')
     p.add_argument('mode', nargs='?', default='',
-                   help='wait: the mode to wait for (hold is waited for after a motion: '
-                   'ctl enable; ctl wait hold; idle, where pdplus starts, at once)')
+                   help='wait: the mode to wait for (done at once if pdplus is in it; to '
+                   'wait for the end of a motion: ctl enable --wait)')
     p.add_argument('--pdplus', default='/pdplus', help='the controller node; its namespace is '
                    'that of the topics and of the drive (default: /pdplus)')
     p.add_argument('--timeout', type=float, default=10.0,

@@ -157,13 +157,12 @@ def wait_outcome(target: str, mode: int, stop_reason: str, seen_moving: bool,
                  after_motion: bool | None = None) -> int | None:
     """``ctl wait``'s verdict on one ControllerState: OK once pdplus is in mode ``target``,
     REFUSED when it is stopped (the latched stop ends the wait: it will not leave it by
-    itself), None to keep waiting. ``after_motion`` (default: for 'hold', the mode a motion
-    ends in) asks for the mode only after pdplus has moved: a wait for 'hold' started before
-    the motion began must not end on the hold it started from. 'idle' is what pdplus starts
-    in (nothing moves until enabled), so ``ctl wait idle`` ends as soon as pdplus is up and
-    idle; ``ctl enable --wait`` asks for either resting mode after the motion."""
+    itself), None to keep waiting. ``ctl wait MODE`` ends as soon as pdplus is in MODE (also
+    when it already is: 'hold' after a motion that ended earlier). ``after_motion`` asks for
+    the mode only after pdplus has moved: ``ctl enable --wait`` waits for a resting mode after
+    the motion it started, so it cannot end on the mode it started from."""
     if after_motion is None:
-        after_motion = target == 'hold'
+        after_motion = False
     if mode == MODE_STOPPED and target != 'stopped':
         return REFUSED
     if MODE_NAMES.get(mode) == target and (seen_moving or not after_motion):

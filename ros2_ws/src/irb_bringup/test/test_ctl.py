@@ -31,10 +31,12 @@ def test_topic_rate_from_arrivals():
 
 
 def test_wait_outcome_follows_a_motion_to_its_end():
-    # ctl wait hold, started while pdplus still holds from before: not done until it moved
+    # enable --wait, started while pdplus still holds from before: not done until it moved
     seq = [(MODE_HOLD, False), (MODE_RAMP, True), (MODE_PATH, True), (MODE_HOLD, True)]
-    verdicts = [core.wait_outcome('hold', m, '', moved) for m, moved in seq]
+    verdicts = [core.wait_outcome('hold', m, '', moved, after_motion=True) for m, moved in seq]
     assert verdicts == [None, None, None, core.OK]
+    # ctl wait hold when pdplus already holds (the motion ended before the wait): done at once
+    assert core.wait_outcome('hold', MODE_HOLD, '', False) == core.OK
     # a latched stop ends any wait but one for 'stopped', with REFUSED
     assert core.wait_outcome('hold', MODE_STOPPED, 'watchdog', True) == core.REFUSED
     assert core.wait_outcome('stopped', MODE_STOPPED, 'watchdog', False) == core.OK

@@ -442,7 +442,7 @@ class PdPlusController:
         if nxt is None:
             return False, why
         if self.profile is None:
-            return False, 'no profile'
+            return False, 'no profile: plan one first (ros2 run irb_planning plan ...)'
         if self.pending is not None:
             if self.active is not None and self.retire is not None:
                 self.retire(self.active)

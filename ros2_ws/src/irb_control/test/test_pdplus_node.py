@@ -299,7 +299,8 @@ def test_builtin_profile_none_waits_for_a_plan():
         assert node.ctrl.profile is None
         node.on_state(joint_state(now_s(node), node.model.ik(np.array([0.75, 0.0, 0.13]))))
         assert node.pub_cmd.sent == [] and len(node.pub_state.sent) == 1
-        assert node.ctrl.enable() == (False, 'no profile')
+        assert node.ctrl.enable() == (
+            False, 'no profile: plan one first (ros2 run irb_planning plan ...)')
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)

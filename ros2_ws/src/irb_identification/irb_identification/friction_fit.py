@@ -100,6 +100,17 @@ def _parametric(v, fc, ds, vs, fv):
     return np.sign(v) * (fc + ds * np.exp(-(v / vs) ** 2)) + fv * v
 
 
+def independent_points(v: np.ndarray, tau: np.ndarray) -> int:
+    """How many of the points (v, tau) carry information of their own for the odd model
+    tau(v) = -tau(-v): a point whose mirror (-v, -tau) is also there is the same measurement
+    twice (eq. 4.8 gives f_neg = -f_pos when it averages the two directions), so the pair
+    counts once. The degrees of freedom and the covariance use this count: with 8 points of
+    4 mirrored speeds a 4-parameter fit has no residual left, and its interval is unknown,
+    not zero."""
+    key = np.round(np.column_stack([np.abs(v), np.sign(v) * tau]), 12)
+    return int(len(np.unique(key, axis=0)))
+
+
 def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> ParametricFit:
     """Coulomb + viscous + Stribeck fit to signed speeds v (m,) [rad/s], tau_f (m,) [N m].
 
@@ -114,14 +125,16 @@ def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> Par
             raise IdentificationError(f'{len(v)} points are too few for a 2-parameter fit')
         X = np.column_stack([np.sign(v), v])
         sol = lsq_linear(X, tau, bounds=(0.0, np.inf)).x          # F_c, F_v >= 0
-        dof = len(v) - 2
-        rmse = float(np.sqrt(np.sum((tau - X @ sol) ** 2) / max(dof, 1)))
+        n_ind = independent_points(v, tau)
+        rep = len(v) / n_ind                # each independent point counted rep times
+        dof = n_ind - 2
+        rmse = float(np.sqrt(np.sum((tau - X @ sol) ** 2) / rep / max(dof, 1)))
         cov = np.full((4, 4), np.nan)
         ci = {}
         free = sol > 0                     # a coefficient on its bound has no interval
         if dof > 0 and free.any():
             Xf = X[:, free]
-            c2 = np.linalg.inv(Xf.T @ Xf) * rmse**2
+            c2 = np.linalg.inv(Xf.T @ Xf) * rmse**2 * rep
             idx = np.array([0, 3])[free]
             cov[np.ix_(idx, idx)] = c2
             q = stats.t.ppf(0.975, dof)
@@ -148,8 +161,10 @@ def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> Par
         if best is None or r.cost < best.cost:
             best = r
     x, J = best.x, best.jac
-    dof = len(v) - 4
-    rmse = float(np.sqrt(2 * best.cost / max(dof, 1)))
+    n_ind = independent_points(v, tau)
+    rep = len(v) / n_ind                    # each independent point counted rep times
+    dof = n_ind - 4
+    rmse = float(np.sqrt(2 * best.cost / rep / max(dof, 1)))
     ci = {}
     cov = None
     # parameters at a bound (e.g. no Stribeck dip) are not identifiable: no half-width
@@ -159,7 +174,7 @@ def fit_parametric(v: np.ndarray, tau: np.ndarray, stribeck: bool = True) -> Par
         cov = np.full((4, 4), np.nan)
         Jf = J[:, free]
         try:
-            cov_f = np.linalg.inv(Jf.T @ Jf) * rmse**2
+            cov_f = np.linalg.inv(Jf.T @ Jf) * rmse**2 * rep
             cov[np.ix_(free, free)] = cov_f
         except np.linalg.LinAlgError:
             pass
@@ -224,6 +239,11 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
                                  stribeck=False)
     except IdentificationError as exc:      # a joint that cannot be fitted is reported, not fatal
         return JointResult(name, points, warnings=warnings, error=f'{name}: {exc}')
+    if par.dof <= 0:
+        n_par = 4 if par.static != par.coulomb else 2
+        warnings.append(f'{name}: {len(points)} speeds for the {n_par} parameters of the fit: '
+                        'no residual is left to estimate their uncertainty (no confidence '
+                        f'interval); measure at least {n_par + 2} speeds')
     degenerate = parametric_problems(par)
     poly_pos = poly_neg = None
     order_pos = choose_order(c, f_pos, config.poly_order)

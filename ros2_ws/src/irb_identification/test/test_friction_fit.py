@@ -69,6 +69,31 @@ def test_parametric_fit_recovers_truth_with_ci(rng):
     assert np.all(band > 0) and np.all(band < 0.2)
 
 
+def test_mirrored_points_are_one_measurement_not_two(rng):
+    """eq. 4.8 gives f_neg = -f_pos: 4 speeds mirrored are 4 independent points for the 4
+    parameters, no residual left: no interval (it was 0 or 1e-14, a false certainty, and a
+    Stribeck term kept on it); 6 speeds give a finite interval."""
+    from irb_identification.friction_fit import independent_points
+    c4 = np.array([0.05, 0.2, 0.5, 1.0])
+    f4 = TRUE.torque(c4) + 0.05 * rng.standard_normal(4)
+    assert independent_points(np.r_[c4, -c4], np.r_[f4, -f4]) == 4
+    fit = fit_parametric(np.r_[c4, -c4], np.r_[f4, -f4])
+    assert fit.dof == 0 and fit.ci95 == {}
+    # identify: the Stribeck term has no support then (interval unknown) and is dropped;
+    # the Coulomb + viscous fit keeps 2 residual degrees of freedom and real intervals
+    res = identify_points('j', [SpeedPoint(c, f, -f, f, f, -f, 0.01, 1, 1)
+                                for c, f in zip(c4, f4)])
+    assert any('Stribeck term dropped' in w for w in res.warnings), res.warnings
+    assert res.parametric.dof == 2 and res.parametric.ci95['coulomb'] > 1e-6
+    c6 = np.array([0.05, 0.1, 0.2, 0.4, 0.7, 1.0])
+    f6 = TRUE.torque(c6) + 0.05 * rng.standard_normal(6)
+    mirrored = fit_parametric(np.r_[c6, -c6], np.r_[f6, -f6])
+    assert mirrored.dof == 2 and mirrored.ci95['coulomb'] > 1e-6
+    # a measurement of its own in each direction (not mirrored) counts twice
+    g6 = -(TRUE.torque(c6) + 0.05 * rng.standard_normal(6))
+    assert independent_points(np.r_[c6, -c6], np.r_[f6, g6]) == 12
+
+
 def test_polynomial_fit_is_exact_on_polynomials():
     v = np.linspace(0.05, 2, 12)
     coef = np.array([3.0, 2.0, -1.0, 0.5, 0.1, -0.02])
