@@ -42,7 +42,7 @@ def run_node(make_node, spin, args=None, spec=None) -> None:
     try:
         try:
             node, interrupted = build_node(make_node)
-        except _CONFIG_ERRORS as exc:
+        except CONFIG_ERRORS as exc:
             # a parameter of the wrong type, a value the node refuses, a file it cannot read:
             # one line naming it, exit 2 (no traceback)
             refused = _one_line(exc)
@@ -67,14 +67,14 @@ def run_node(make_node, spin, args=None, spec=None) -> None:
         sys.exit(2)
 
 
-def _config_errors() -> tuple:
+def config_errors() -> tuple:
     from rclpy.exceptions import (InvalidParameterTypeException,
                                   InvalidParameterValueException, ParameterException)
     return (InvalidParameterTypeException, InvalidParameterValueException, ParameterException,
             ValueError, FileNotFoundError)
 
 
-_CONFIG_ERRORS = _config_errors()
+CONFIG_ERRORS = config_errors()
 
 
 def _one_line(exc: BaseException) -> str:

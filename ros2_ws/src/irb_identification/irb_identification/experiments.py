@@ -313,7 +313,7 @@ class ExperimentsNode(Node):
 
 def main(args=None):
     exit_if_help(args, SPEC)
-    from irb_description.node_main import _CONFIG_ERRORS
+    from irb_description.node_main import CONFIG_ERRORS
     init(args)
     node = None
     try:
@@ -330,7 +330,7 @@ def main(args=None):
               + ' '.join(f'--bag {b}' for b in bags) + ' --out friction_map.yaml')
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (RunError, *_CONFIG_ERRORS) as exc:
+    except (RunError, *CONFIG_ERRORS) as exc:
         print(f'experiments: {exc}', file=sys.stderr)
         return 1
     finally:

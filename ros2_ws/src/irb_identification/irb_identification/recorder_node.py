@@ -463,7 +463,7 @@ def main(args=None):
     from irb_description.node_help import exit_if_help
     exit_if_help(args, SPEC)
     import rclpy
-    from irb_description.node_main import (_CONFIG_ERRORS, build_node, ignore_stop_signals,
+    from irb_description.node_main import (CONFIG_ERRORS, build_node, ignore_stop_signals,
                                            init, spin_until_signal)
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
@@ -471,7 +471,7 @@ def main(args=None):
     init(args)
     try:
         node, interrupted = build_node(__getattr__('RecorderNode'))
-    except (BagError, OSError, *_CONFIG_ERRORS) as exc:
+    except (BagError, OSError, *CONFIG_ERRORS) as exc:
         text = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         print(f'recorder: {text}', file=sys.stderr)
         rclpy.try_shutdown()

@@ -278,7 +278,7 @@ def main(args=None):
     from irb_description.node_help import exit_if_help
     exit_if_help(args, SPEC)
     import rclpy
-    from irb_description.node_main import (_CONFIG_ERRORS, build_node, ignore_stop_signals,
+    from irb_description.node_main import (CONFIG_ERRORS, build_node, ignore_stop_signals,
                                            init, running)
     from rclpy.executors import ExternalShutdownException
 
@@ -286,7 +286,7 @@ def main(args=None):
     init(args)
     try:
         node, interrupted = build_node(__getattr__('ReplayNode'))
-    except (BagError, *_CONFIG_ERRORS) as exc:
+    except (BagError, *CONFIG_ERRORS) as exc:
         print(f'replay: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 1
