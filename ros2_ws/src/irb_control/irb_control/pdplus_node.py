@@ -692,9 +692,9 @@ def main(args=None):
     try:
         run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
                  args, spec=SPEC)
-    except PathConfigError as exc:       # one line and exit 1, no traceback
-        print(f'pdplus: {exc}', file=sys.stderr)
-        sys.exit(1)
+    except PathConfigError as exc:       # (run_node already ends a ValueError in one line,
+        print(f'pdplus: {exc}', file=sys.stderr)   # exit 2; kept for a non-ValueError one)
+        sys.exit(2)
 
 
 if __name__ == '__main__':

@@ -109,6 +109,6 @@ def test_pdplus_refuses_a_bad_path_file_with_one_line(tmp_path, text, words):
     res = subprocess.run(['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-p',
                           f'path_file:={f}'], capture_output=True, text=True, timeout=60,
                          env=env)
-    assert res.returncode == 1
+    assert res.returncode == 2          # a configuration the node refuses (node_main.run_node)
     assert words in res.stderr and 'Traceback' not in res.stderr
     assert res.stderr.strip().count('\n') == 0
