@@ -92,13 +92,22 @@ def test_link_delay_seen_by_plain_udp():
 class _Lines:
     def __init__(self):
         self.lines, self.lock = [], threading.Lock()
+        self.added = threading.Condition(self.lock)
 
     def write(self, text):
         with self.lock:
             self.lines.append(text)
+            self.added.notify_all()
 
     def flush(self):
         pass
+
+    def wait_for(self, prefix, needle, timeout_s):
+        """True once a line of ``prefix`` holds ``needle`` (woken by each new line, bounded)."""
+        def seen():
+            return any(ln.startswith(f'[{prefix}]') and needle in ln for ln in self.lines)
+        with self.lock:
+            return self.added.wait_for(seen, timeout_s)
 
     def has(self, prefix, needle):
         with self.lock:
@@ -299,7 +308,9 @@ def test_link_failure_between_simulator_and_pdplus_stops_with_the_reason(tmp_pat
             end = operator.ask('wait_end', 90)
             assert end.get('done') and end['modes'][-1] == 4, (end, lines.tail())
             assert 'watchdog' in end['stop_reason'], end
-            assert lines.has('pdplus', 'watchdog'), lines.tail()
+            # pdplus's own log line comes through its output pipe, which can trail the
+            # controller_state that ended the wait: wait for it too (bounded)
+            assert lines.wait_for('pdplus', 'watchdog', 30.0), lines.tail()
         finally:
             if operator is not None:
                 operator.close()
