@@ -22,11 +22,11 @@ def glue_matches_rectangle(spec, rect: dict) -> str:
     band), else why not: the cycle file repeats the rectangle's geometry (a path mapping), and
     the study must be about the contour the job runs."""
     import numpy as np
-    from irb_description.path import path_spec, rectangle_path
+    from irb_description.path import PROCESS_KEY
 
-    from .thesis_run import rectangle_process
-    ref = path_spec(rectangle_path(rect['center_m'], rect['normal'], float(rect['width_m']),
-                                   float(rect['height_m']), float(rect['blend_radius_m'])))
+    from .thesis_run import rectangle_spec
+    ref = rectangle_spec(rect)
+    band = ref.pop(PROCESS_KEY, {})
     op = spec.motions[0]
     got = dict(op.path)
     if got.get('type') != ref['type'] or np.shape(got.get('waypoints')) != np.shape(
@@ -35,7 +35,6 @@ def glue_matches_rectangle(spec, rect: dict) -> str:
     if not np.allclose(got['waypoints'], ref['waypoints'], atol=1e-9) or not np.allclose(
             got.get('blend_radii', []), ref.get('blend_radii', []), atol=1e-12):
         return f'its first motion {op.name!r} has other corners or blends than the rectangle'
-    band = rectangle_process(rect)
     if {k: float(v) for k, v in (op.process or {}).items()} != band:
         return f'its first motion {op.name!r} has another process band ({op.process} vs {band})'
     return ''

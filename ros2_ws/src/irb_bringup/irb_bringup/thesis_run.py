@@ -492,10 +492,9 @@ def process_text(band: dict) -> str:
     return ', '.join(parts)
 
 
-def write_rectangle(rect: dict, out: Path) -> Path:
-    """The gluing contour of the config's ``rectangle`` block as a path YAML file (what
-    pdplus's path_file and the plan client read), with its process constraints as the
-    file's ``process`` block (the plan client takes them from there)."""
+def rectangle_spec(rect: dict) -> dict:
+    """The gluing contour of the config's ``rectangle`` block as a path mapping, with its
+    process constraints as the ``process`` block (absent if none are set)."""
     from irb_description.path import PROCESS_KEY, path_spec, rectangle_path
     path = rectangle_path(rect['center_m'], rect['normal'], float(rect['width_m']),
                           float(rect['height_m']), float(rect['blend_radius_m']))
@@ -503,7 +502,13 @@ def write_rectangle(rect: dict, out: Path) -> Path:
     band = rectangle_process(rect)
     if band:
         spec[PROCESS_KEY] = band
-    out.write_text(yaml.safe_dump(spec, default_flow_style=None))
+    return spec
+
+
+def write_rectangle(rect: dict, out: Path) -> Path:
+    """``rectangle_spec`` as a path YAML file (what pdplus's path_file and the plan client
+    read; the plan client takes the process constraints from its ``process`` block)."""
+    out.write_text(yaml.safe_dump(rectangle_spec(rect), default_flow_style=None))
     return out
 
 

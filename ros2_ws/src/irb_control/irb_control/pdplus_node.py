@@ -16,7 +16,6 @@ from __future__ import annotations
 import gc
 import math
 import queue
-import sys
 import threading
 import time
 
@@ -689,12 +688,9 @@ class PathConfigError(ValueError):
 
 def main(args=None):
     short_switch_interval()
-    try:
-        run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
-                 args, spec=SPEC)
-    except PathConfigError as exc:       # (run_node already ends a ValueError in one line,
-        print(f'pdplus: {exc}', file=sys.stderr)   # exit 2; kept for a non-ValueError one)
-        sys.exit(2)
+    # a PathConfigError (a ValueError) ends in one line and exit 2 through run_node
+    run_node(PdPlusNode, lambda node: spin_with(node.P['executor'], node.realtime)(node),
+             args, spec=SPEC)
 
 
 if __name__ == '__main__':

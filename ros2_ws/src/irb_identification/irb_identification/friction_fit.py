@@ -239,11 +239,6 @@ def identify_points(name: str, points: list[SpeedPoint], config: FitConfig = Fit
                                  stribeck=False)
     except IdentificationError as exc:      # a joint that cannot be fitted is reported, not fatal
         return JointResult(name, points, warnings=warnings, error=f'{name}: {exc}')
-    if par.dof <= 0:
-        n_par = 4 if par.static != par.coulomb else 2
-        warnings.append(f'{name}: {len(points)} speeds for the {n_par} parameters of the fit: '
-                        'no residual is left to estimate their uncertainty (no confidence '
-                        f'interval); measure at least {n_par + 2} speeds')
     degenerate = parametric_problems(par)
     poly_pos = poly_neg = None
     order_pos = choose_order(c, f_pos, config.poly_order)

@@ -56,12 +56,6 @@ def recording_qos(endpoints, depth: int = 10000) -> QoSProfile:
     return qos
 
 
-def coerce_overrides(node, params) -> None:
-    """``node_main.coerce_overrides`` (kept here for the package's callers)."""
-    from irb_description.node_main import coerce_overrides as coerce
-    coerce(node, params)
-
-
 def declare_params(node, params) -> dict:
     """``node_main.declare_params`` (which coerces the overrides itself)."""
     from irb_description.node_main import declare_params as declare
