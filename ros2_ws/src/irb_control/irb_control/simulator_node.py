@@ -26,7 +26,7 @@ from irb_description.node_main import (declare_params, latched_qos, run_node, ru
 from irb_description.robot_state import six_joint_names, six_joints
 from irb_description.stamps import sec_nanosec
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from irb_interfaces.msg import AxisStatus
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -172,8 +172,10 @@ class SimulatorNode(Node):
                                 lambda req, resp, mode=mode: self.on_power_mode(mode, resp))
         self._power_names = list(self.joint_names) + [f'total_{m}' for m in BUS_MODES]
         self.pub_state = self.create_publisher(JointState, 'joint_states', state_pub_qos())
-        self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp',
-                                             QoSProfile(depth=50))
+        # the camera's 100 Hz like the loop topics: a reliable reader (the recorder) that is
+        # busy for a moment (subscribing, a disk flush) must not lose samples (was depth 50:
+        # 0.5 s, and a fresh-clone CI lost one at the recorder's start)
+        self.pub_cam = self.create_publisher(PointStamped, 'camera/tcp', state_pub_qos())
         self.pub_clock = (self.create_publisher(Clock, '/clock', qos_profile_sensor_data)
                           if self.lockstep else None)
         self.create_subscription(JointState, 'torque_command', self.on_command_raw,
