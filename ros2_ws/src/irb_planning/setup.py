@@ -27,6 +27,7 @@ setup(
             'plan = irb_planning.plan_cli:main',
             'place = irb_planning.place_cli:main',
             'cycle = irb_planning.cycle_cli:main',
+            'plan6 = irb_planning.plan6_cli:main',
         ],
     },
 )

@@ -15,8 +15,9 @@ limits. It shares nothing with the planner's theta interpolation or the closed-f
   of a dense table, then Newton steps, ``verify.PathCurve``, the three-axis check's
   projection);
 * **orientation error**: the angle of R_law(theta*)^T R_played, theta* the TCP's projection
-  onto the path (the law at the point of the path the tool is at), 2 asin(|R_a - R_b|_F /
-  sqrt(8)), exact for small angles;
+  onto the path (the law at the point of the path the tool is at; on a closed path unwrapped
+  along the samples, so the lap's end is at 2 pi), 2 asin(|R_a - R_b|_F / sqrt(8)), exact for
+  small angles;
 * **limits** of the played samples: positions, speeds, torques = the given rigid-body
   function (pinocchio RNEA on six joints in the planner) + friction evaluated here from the
   map's numbers (``verify.MapFriction``); energy int sum |tau_i qd_i| dt.
@@ -141,7 +142,10 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
         T = dh.forward(qq) @ tcp
         p = T[:, :3, 3]
         pos = curve.deviation(p)
-        th = curve._nearest(p)
+        # theta* along the time-ordered samples: on a closed path unwrapped from about 0, so
+        # the end of the lap is at 2 pi, not at the start's 0 (the same point, where a law
+        # like slerp has another orientation)
+        th = np.clip(curve.theta(p), 0.0, 2 * np.pi)
         ori = rotation_angle(np.asarray(rotation(th), float), T[:, :3, :3])
         return pos, ori
     pos_pts, ori_pts = errors(q)
