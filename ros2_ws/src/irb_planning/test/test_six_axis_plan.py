@@ -1,0 +1,115 @@
+"""Six-axis planning (issue 30): a plan along a path with an orientation law, played by a player
+written here (scipy ``BPoly.from_derivatives`` per joint, 10 kHz) and measured against the
+task's own poses at the profile's time law through irb_description's DH kinematics
+(``orientation.pose_errors``), which shares nothing with the closed-form IK or the planner's
+check; the three-axis planner unchanged by it; path files with an orientation block."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.interpolate import BPoly
+
+from irb_description.orientation import pose_errors, tool_poses
+from irb_description.path import path_from_spec
+
+from irb_planning.planner import Planner
+from irb_planning.request import PlanRequest
+from irb_planning.six_axis_check import play
+from irb_planning.six_axis_plan import SixAxisPlanError, SixAxisPlanner, task_from_spec
+
+ARC = dict(type='arc', center=[0.65, 0.1, 0.35], normal=[0.0, -0.3, 1.0], radius=0.1,
+           start_angle=0.5, sweep=4.0)
+GRID = 40
+DURATION = 2.0          # [s] (time-optimal about 0.6 s)
+
+
+def three_axis_plan():
+    """The thesis circle planned by the three-axis planner (coarse grid)."""
+    return Planner().plan(PlanRequest(objective='energy', duration=10.0, grid_size=30))
+
+
+@pytest.fixture(scope='module')
+def planned():
+    before = three_axis_plan()
+    planner = SixAxisPlanner()
+    path, law = task_from_spec({**ARC, 'orientation': {'law': 'path_normal'}})
+    prob = planner.problem(path, law, GRID)
+    plan = planner.plan(prob, 'energy', DURATION)
+    return planner, path, law, plan, before
+
+
+def test_plan_played_within_goals(planned):
+    planner, path, law, plan, _ = planned
+    tr = plan.trajectory
+    t, q, qd, qdd = (np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd'))
+    assert q.shape[1] == 6 and abs(t[-1] - DURATION) < 1e-6
+    assert plan.min_duration < DURATION
+    # the player: per joint the quintic through (q, qd, qdd) at the points, 10 kHz clock
+    ts = np.unique(np.concatenate([t[0] + np.arange(int((t[-1] - t[0]) * 1e4) + 1) / 1e4, t]))
+    ts = ts[ts <= t[-1]]
+    qs = np.stack([BPoly.from_derivatives(t, np.stack([q[:, i], qd[:, i], qdd[:, i]], 1),
+                                          orders=5)(ts) for i in range(6)], axis=1)
+    # the wanted pose at each played instant: theta(t) of the profile's time law, the path's
+    # point and the law's rotation there
+    theta = plan.profile.sample(ts)[0]
+    pos, ori = pose_errors(planner.kin, qs, tool_poses(path, law, theta))
+    assert pos.max() <= 1e-4, f'{pos.max() * 1e3:.4f} mm'
+    assert np.degrees(ori.max()) <= 0.05, f'{np.degrees(ori.max()):.4f} deg'
+    # the joints move (the wrist keeps the tool normal to the tilted plane) inside the limits
+    assert np.ptp(qs[:, 3:], axis=0).max() > 0.05
+    assert np.all(qs >= planner.limits.lower - 1e-9) and np.all(qs <= planner.limits.upper + 1e-9)
+    assert np.all(plan.check.peak_torque <= planner.limits.torque)
+    assert np.all(plan.check.peak_speed <= planner.limits.velocity)
+    assert plan.energy > 0 and abs(plan.energy / plan.optimizer_energy - 1) < 0.05
+
+
+def test_played_check_sees_a_wrong_point(planned):
+    """The planner's own played check (six_axis_check) flags a wrist point 10 mrad off."""
+    planner, path, law, plan, _ = planned
+    tr = {k: np.array(v, float) for k, v in plan.trajectory.items()}
+    prob = type('P', (), {'path': path, 'law': law})
+    ok = planner.check(prob, tr['t'], tr['q'], tr['qd'], tr['qdd'])
+    assert ok.ok and ok.orientation_error < np.radians(0.025)
+    k = len(tr['t']) // 2
+    tr['q'][k, 4] += 0.01
+    bad = planner.check(prob, tr['t'], tr['q'], tr['qd'], tr['qdd'])
+    assert not bad.ok and bad.orientation_error > np.radians(0.5)
+    assert any('off its law' in p for p in bad.problems)
+
+
+def test_player_is_the_quintic_hermite():
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(1e-3, 0.05, 12))
+    q, qd, qdd = (rng.normal(size=(12, 6)) for _ in range(3))
+    ts, qs, qds, qdds = play(t, q, qd, qdd, 1e4)
+    for i in range(6):
+        ref = BPoly.from_derivatives(t, np.stack([q[:, i], qd[:, i], qdd[:, i]], 1), orders=5)
+        np.testing.assert_allclose(qs[:, i], ref(ts), atol=1e-12)
+        np.testing.assert_allclose(qds[:, i], ref.derivative()(ts), atol=1e-9)
+
+
+def test_three_axis_plan_unchanged(planned):
+    """A three-axis plan made after the six-axis one equals the one made before it, bit for
+    bit: the six-axis module changes nothing the three-axis planner uses."""
+    *_, before = planned
+    after = three_axis_plan()
+    np.testing.assert_array_equal(after.profile.theta_dot, before.profile.theta_dot)
+    for key in ('t', 'q', 'qd', 'qdd', 'tau'):
+        np.testing.assert_array_equal(after.trajectory[key], before.trajectory[key])
+    assert after.evaluation.energy == before.evaluation.energy
+    assert before.trajectory['q'].shape[1] == 3
+
+
+def test_path_files_with_an_orientation_block():
+    spec = {**ARC, 'orientation': {'law': 'fixed', 'rpy': [np.pi, 0.2, 0.0]}}
+    # the three-axis reader keeps refusing the block, naming the six-axis chain
+    with pytest.raises(ValueError, match='six-axis'):
+        path_from_spec(spec)
+    path, law = task_from_spec(spec)
+    assert path.length > 0 and law.rotation(np.array([1.0])).shape == (1, 3, 3)
+    with pytest.raises(SixAxisPlanError, match="needs an 'orientation' block"):
+        task_from_spec(ARC)
+    with pytest.raises(SixAxisPlanError, match='process'):
+        task_from_spec({**spec, 'process': {'tcp_speed_max': 0.1}})
+    with pytest.raises(SixAxisPlanError, match='orientation law'):
+        task_from_spec({**ARC, 'orientation': {'law': 'tangent'}})
