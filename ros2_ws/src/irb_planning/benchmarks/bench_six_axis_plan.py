@@ -119,6 +119,8 @@ def main(argv=None):
                 point_position_error_mm=c.point_position_error * 1e3,
                 point_orientation_error_deg=float(np.degrees(c.point_orientation_error)),
                 peak_torque_nm=c.peak_torque.tolist(), peak_speed_rad_s=c.peak_speed.tolist(),
+                peak_accel_rad_s2=c.peak_accel.tolist(),
+                time_optimal_peak_accel_rad_s2=tchk.peak_accel.tolist(),
                 time_optimal_played_position_error_mm=tchk.position_error * 1e3,
                 time_optimal_played_orientation_error_deg=float(
                     np.degrees(tchk.orientation_error)),
@@ -136,13 +138,15 @@ def main(argv=None):
             continue
         # planning time: six-axis (path_normal law) against three-axis, same path, same T
         path, lw = task_from_spec({**spec, 'orientation': law_specs(name)['path_normal']})
-        t6, t3, e3 = [], [], None
+        t6, t3, e3, parts6, parts3 = [], [], None, [], []
         for _ in range(a.repeats):
             planner6 = SixAxisPlanner()
             t0 = time.perf_counter()
             try:
-                planner6.plan(planner6.problem(path, lw, a.grid), 'energy', duration)
+                pl6 = planner6.plan(planner6.problem(path, lw, a.grid), 'energy', duration)
                 t6.append(time.perf_counter() - t0)
+                parts6.append({'build_s': pl6.build_time, 'energy_solve_s': pl6.solve_time,
+                               'energy_iterations': pl6.iterations})
             except SixAxisPlanError as exc:
                 print(f'{name}: six-axis timing refused: {exc}', file=sys.stderr)
             planner3 = Planner()
@@ -151,6 +155,8 @@ def main(argv=None):
                 r3 = planner3.plan(three_axis_request(spec, duration, a.grid))
                 t3.append(time.perf_counter() - t0)
                 e3 = r3.evaluation.energy
+                parts3.append({'energy_solve_s': r3.solve_time,
+                               'energy_iterations': r3.iterations})
             except Exception as exc:  # noqa: BLE001 - a refusal is a result here
                 print(f'{name}: three-axis refused: {exc}', file=sys.stderr)
             load.append(os.getloadavg()[0])
@@ -159,7 +165,8 @@ def main(argv=None):
                        'six_axis_s': t6, 'three_axis_s': t3, 'six_axis_median_s': med(t6),
                        'three_axis_median_s': med(t3),
                        'ratio_median': (med(t6) / med(t3)) if t6 and t3 else None,
-                       'three_axis_energy_j': e3})
+                       'three_axis_energy_j': e3, 'six_axis_parts': parts6,
+                       'three_axis_parts': parts3})
         print(f'{name:10s} timing six {med(t6)} s, three {med(t3)} s', file=sys.stderr)
     ok = [c for c in cases if 'refused' not in c]
     dump(a.out, {

@@ -93,7 +93,8 @@ def play(t, q, qd, qdd, rate_hz: float = 10_000.0):
 class PlayedCheck:
     """Outcome of ``check_played``: the largest position error [m] and orientation error [rad]
     of the played TCP (and where: t [s]); at the points themselves; peak |speed| and |torque|
-    (6,) of the played samples; energy [J]; problems (one line each, empty = within)."""
+    (6,) of the played samples (and peak |acceleration|, reported, not checked); energy [J];
+    problems (one line each, empty = within)."""
 
     position_error: float
     orientation_error: float
@@ -110,6 +111,7 @@ class PlayedCheck:
     ts: np.ndarray = field(default=None, repr=False)
     position_errors: np.ndarray = field(default=None, repr=False)
     orientation_errors: np.ndarray = field(default=None, repr=False)
+    peak_accel: np.ndarray = field(default=None)     # (6,) [rad/s^2] of the played samples
 
     @property
     def ok(self) -> bool:
@@ -180,4 +182,5 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
             problems.append(f'joint {i + 1} torque {peak_tau[i]:.2f} N m > {torque[i]:.2f}')
     return PlayedCheck(float(pos[kp]), float(ori[ko]), float(ts[kp]), float(ts[ko]),
                        float(pos_pts.max()), float(ori_pts.max()), peak_v, peak_tau, energy,
-                       float(t[-1] - t[0]), int(ts.size), problems, ts, pos, ori)
+                       float(t[-1] - t[0]), int(ts.size), problems, ts, pos, ori,
+                       np.abs(qdds).max(axis=0))
