@@ -44,7 +44,8 @@ def summary(plan, limits) -> str:
              f'objective       {plan.objective}',
              f'time-optimal    {plan.min_duration:.3f} s',
              f'duration        {plan.duration:.3f} s',
-             f'energy          {plan.energy:.2f} J as played (optimiser {plan.optimizer_energy:.2f} J)',
+             f'energy          {plan.energy:.2f} J as played '
+             f'(optimiser {plan.optimizer_energy:.2f} J)',
              f'solve           {plan.solve_time:.2f} s, {plan.iterations} iterations '
              f'(problem built in {plan.build_time:.2f} s)',
              f'points          {len(plan.trajectory["t"])}',

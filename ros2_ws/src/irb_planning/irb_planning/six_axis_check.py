@@ -6,9 +6,9 @@ tool-orientation law R(theta), the TCP on tool0, the thesis's DH table as number
 limits. It shares nothing with the planner's theta interpolation or the closed-form IK:
 
 * **as played**: per joint the quintic Hermite polynomial through (q, qd, qdd) at both ends of
-  every interval (scipy ``BPoly`` in the Bernstein basis, ``play``; what a joint-trajectory controller does
-  with positions, velocities and accelerations), sampled on a global clock at ``rate_hz``
-  from the first stamp (and at every stamp);
+  every interval (scipy ``BPoly`` in the Bernstein basis, ``play``; what a joint-trajectory
+  controller does with positions, velocities and accelerations), sampled on a global clock
+  at ``rate_hz`` from the first stamp (and at every stamp);
 * **kinematics**: the TCP pose of every played sample by its own vectorised DH product
   (thesis Table 3.2, eq. 3.2-3.4) times the TCP transform;
 * **position error**: the TCP's distance from the path (its own projection: the nearest point

@@ -99,10 +99,10 @@ def load_limits(config: dict | None = None) -> SixAxisLimits:
     k, d = load_kinematics(), load_dynamics()
     names = list(k.joint_names)
     block = d.friction
-    lo, hi = block['valid_range_rad_s']
 
     def joint(i, src):
-        return JointFriction(coulomb=float(src['coulomb_nm'][i]), static=float(src['static_nm'][i]),
+        return JointFriction(coulomb=float(src['coulomb_nm'][i]),
+                             static=float(src['static_nm'][i]),
                              stribeck_velocity=float(src['stribeck_velocity_rad_s'][i]),
                              viscous=float(src['viscous_nms_rad'][i]),
                              valid_range=tuple(float(x) for x in src['valid_range_rad_s']))
@@ -115,7 +115,6 @@ def load_limits(config: dict | None = None) -> SixAxisLimits:
         wrist_src = f'assumption, irb_planning config/{CONFIG_NAME} wrist_friction'
     if len(joints) != 6:
         raise ValueError(f'friction for {len(joints)} joints, expected 6')
-    del lo, hi
     fm = FrictionMap(tuple(names), tuple(joints), 'nominal six-axis')
     torque = np.asarray(d.torque_limit, float)
     if torque.size != 6:
