@@ -380,6 +380,7 @@ class SixAxisPlanner:
             frac = np.arange(m) / m
             theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
                               nodes[-1])
+            theta = self._clear_twins(profile, theta, prob.path.breaks)
             t, theta, td, tdd, jp = message_points(profile, theta, prob.path.breaks,
                                                    s.min_point_spacing_s, prob.sample)
             qd = jp.dq * td[:, None]
@@ -396,6 +397,25 @@ class SixAxisPlanner:
             problems.append(f'inconsistent {bad.what}: joint {bad.joint + 1} at point '
                             f'{bad.point} (t = {t[bad.point]:.4f} s): {bad.detail()}')
         return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd}, chk, problems
+
+    def _clear_twins(self, profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray
+                     ) -> np.ndarray:
+        """``theta`` without the candidates (other than the piece ends themselves) less than
+        1.5 min_point_spacing_s from a piece end in time: ``message_points`` puts two points
+        half the spacing before and after each piece end, and its spacing rule may otherwise
+        keep a nearby candidate instead of a twin, leaving an interval across the jump of
+        Phi'' whose declared end accelerations do not bound it (seen on the rectangle's
+        time-optimal plan: joint 5, -22.8 rad/s^2 inside, -19.1 declared at both ends)."""
+        inner = breaks[(breaks > theta[0]) & (breaks < theta[-1])] if breaks.size else breaks
+        if not inner.size:
+            return theta
+        t_b = profile.theta_at(inner)[0]
+        t = profile.theta_at(theta)[0]
+        near = np.min(np.abs(t[:, None] - t_b[None, :]), axis=1) < \
+            1.5 * self.settings.min_point_spacing_s
+        keep = ~near | np.isin(theta, inner)
+        keep[[0, -1]] = True
+        return theta[keep]
 
     def rigid_torque(self, q, qd, qdd) -> np.ndarray:
         """pinocchio RNEA on six joints (M, 6) -> (M, 6) [N m] (the check's dynamics)."""
