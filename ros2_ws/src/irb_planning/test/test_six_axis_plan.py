@@ -113,3 +113,30 @@ def test_path_files_with_an_orientation_block():
         task_from_spec({**spec, 'process': {'tcp_speed_max': 0.1}})
     with pytest.raises(SixAxisPlanError, match='orientation law'):
         task_from_spec({**ARC, 'orientation': {'law': 'tangent'}})
+
+
+def test_plan6_refuses_bad_files_in_one_line(tmp_path, capsys):
+    from irb_planning.plan6_cli import main
+    three_axis = tmp_path / 'three.yaml'
+    three_axis.write_text('type: line\nwaypoints: [[0.55, -0.25, 0.25], [0.75, 0.2, 0.45]]\n')
+    bad_law = tmp_path / 'bad.yaml'
+    bad_law.write_text('type: line\nwaypoints: [[0.55, -0.25, 0.25], [0.75, 0.2, 0.45]]\n'
+                       'orientation: {law: path_normal}\n')
+    for f, words in ((tmp_path / 'missing.yaml', 'cannot read'),
+                     (three_axis, "needs an 'orientation' block"),
+                     (bad_law, 'a line has no plane')):
+        assert main(['--path-file', str(f), '--duration', '2']) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and words in err, err
+    assert main(['--path-file', str(three_axis)]) == 2          # energy without a duration
+    assert '--duration' in capsys.readouterr().err
+
+
+def test_plan6_refuses_an_unreachable_path(tmp_path, capsys):
+    from irb_planning.plan6_cli import main
+    far = tmp_path / 'far.yaml'
+    far.write_text('type: line\nwaypoints: [[2.5, 0.0, 0.3], [2.7, 0.1, 0.3]]\n'
+                   'orientation: {law: fixed, rpy: [3.14159, 0.0, 0.0]}\n')
+    assert main(['--path-file', str(far), '--duration', '2']) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and 'unreachable' in err and 'workspace' in err, err
