@@ -385,7 +385,7 @@ class SixAxisPlanner:
                                                    s.min_point_spacing_s, prob.sample)
             qd = jp.dq * td[:, None]
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
-            chk = self.check(prob, t, jp.q, qd, qdd)
+            chk = self.check(prob, t, jp.q, qd, qdd, torque=False)
             bad = worst_inconsistency(t, jp.q, qd, qdd, 0.5 * CONSISTENCY_RTOL,
                                       0.5 * CONSISTENCY_ATOL) if consistency else None
             within = (chk.position_error <= 0.5 * s.path_tolerance_m and
@@ -393,6 +393,7 @@ class SixAxisPlanner:
             if (within and bad is None) or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points:
                 break
             m *= 2
+        chk = self.check(prob, t, jp.q, qd, qdd)        # the torques too, on the final points
         if bad is not None:
             problems.append(f'inconsistent {bad.what}: joint {bad.joint + 1} at point '
                             f'{bad.point} (t = {t[bad.point]:.4f} s): {bad.detail()}')
@@ -422,13 +423,15 @@ class SixAxisPlanner:
         inv = self.dynamics.inverse_dynamics
         return np.array([inv(a, b, c) for a, b, c in zip(q, qd, qdd)])
 
-    def check(self, prob: SixAxisProblem, t, q, qd, qdd) -> PlayedCheck:
-        """``six_axis_check.check_played`` of the points with this planner's limits."""
+    def check(self, prob: SixAxisProblem, t, q, qd, qdd, torque: bool = True) -> PlayedCheck:
+        """``six_axis_check.check_played`` of the points with this planner's limits (the
+        played torques and energy only with ``torque``)."""
         s, lim = self.settings, self.limits
         return check_played(t, q, qd, qdd, prob.path, prob.law.rotation, self.tcp, self.dh,
                             lim.lower, lim.upper, np.minimum(
                                 lim.velocity, lim.friction.valid_range()[:, 1]), lim.torque,
-                            self.rigid_torque, self._friction_joints, self.kin.joint_names,
+                            self.rigid_torque if torque else None, self._friction_joints,
+                            self.kin.joint_names,
                             s.play_rate_hz, s.path_tolerance_m,
                             np.radians(s.orientation_tolerance_deg))
 
