@@ -1,7 +1,9 @@
 """``plan6``: a six-axis plan along a path file with an orientation block (offline, no ROS graph).
 
-    ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8
-    ros2 run irb_planning plan6 --path-file glue6.yaml --objective time --json plan6.json
+    ros2 run irb_planning plan6 --path-file \
+        $(ros2 pkg prefix irb_planning)/share/irb_planning/config/path6_rectangle.yaml \
+        --duration 8 --json plan6.json
+    ros2 run irb_planning plan6 --path-file glue6.yaml --objective time
 
 The path file is ``plan --path-file``'s mapping plus an ``orientation`` block
 (``irb_description.orientation.orientation_from_spec``): law fixed (rpy or z/x), path_normal
