@@ -527,8 +527,9 @@ def path_from_spec(spec: dict) -> PathBase:
         # read by irb_description.orientation (six axes); the three-axis planner and pdplus
         # cannot keep a tool orientation, and say so rather than drop the block
         raise ValueError("an 'orientation' block needs the six-axis chain "
-                         '(irb_description.orientation, doc/six_axis.md); the planner and '
-                         'pdplus drive joints 1-3 with the wrist locked')
+                         '(irb_description.orientation, doc/six_axis.md; plan it with '
+                         '`ros2 run irb_planning plan6`); the planner and pdplus drive '
+                         'joints 1-3 with the wrist locked')
     if extra:
         raise ValueError(f'path type {kind!r} takes {sorted(known[kind])}, not {sorted(extra)}')
 
