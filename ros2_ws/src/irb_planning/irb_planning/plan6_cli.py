@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 
+MIN_GRID, MAX_GRID = 20, 1000      # theta nodes (as the three-axis planner's requests)
 EXAMPLE = 'ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8 --json plan6.json'
 
 
@@ -64,8 +65,15 @@ def summary(plan, limits) -> str:
 
 def main(args=None):
     a = parse_args(sys.argv[1:] if args is None else args)
-    if a.objective == 'energy' and not a.duration > 0:
-        print('plan6: an energy plan needs --duration > 0 [s]', file=sys.stderr)
+    if a.objective == 'energy' and not (a.duration > 0 and a.duration < float('inf')):
+        print('plan6: an energy plan needs a finite --duration > 0 [s]', file=sys.stderr)
+        return 2
+    if a.grid and not MIN_GRID <= a.grid <= MAX_GRID:
+        print(f'plan6: --grid must be 0 (the config\'s) or {MIN_GRID} .. {MAX_GRID}',
+              file=sys.stderr)
+        return 2
+    if a.tcp is not None and not all(abs(x) < 1.0 for x in a.tcp):
+        print('plan6: --tcp must be finite and within 1 m of tool0', file=sys.stderr)
         return 2
     import numpy as np
 

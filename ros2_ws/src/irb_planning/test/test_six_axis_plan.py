@@ -130,6 +130,9 @@ def test_plan6_refuses_bad_files_in_one_line(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and words in err, err
     assert main(['--path-file', str(three_axis)]) == 2          # energy without a duration
     assert '--duration' in capsys.readouterr().err
+    for bad in (['--grid', '5'], ['--tcp', '0', '0', 'nan'], ['--duration', 'inf']):
+        assert main(['--path-file', str(three_axis), '--duration', '2'] + bad) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
 def test_plan6_refuses_an_unreachable_path(tmp_path, capsys):
