@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -235,7 +236,7 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
     logs = {n: open(RESULTS / f'handover_{n}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
                              '-p', 'profile_duration_s:=3.0', '-p', 'auto_enable:=false',
-                             '-p', f'max_plan_points:={points}'],
+                             '-p', f'max_plan_points:={points}', '-p', 'gc_report_ms:=2.0'],
                             stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim_stats = RESULTS / 'handover_simulator_stats.json'
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
@@ -339,6 +340,9 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
     steps = [(t, deserialize_message(b, ControllerState)) for t, b in cs]
     run_minutes = (steps[-1][0] - steps[0][0]) / 60.0 if len(steps) > 1 else float('nan')
     floor_after = _machine_floor(floor_s, rt_priority)
+    # pdplus's garbage collections over 2 ms (gc_report_ms), from its log
+    gc_ms = [float(x) for x in re.findall(r'collection took ([0-9.]+) ms',
+                                          (RESULTS / 'handover_pdplus.log').read_text())]
 
     # the simulator's own record: when each state went out and when its answer came back
     # (CLOCK_MONOTONIC, the same clock in every process of the host; the listener's arrival
@@ -387,6 +391,7 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
            'modes_seen': sorted(set(modes)), 'summary': summary, 'windows': wins,
            # the host's own stalls against the run's stops, per minute
            'machine_floor_before': floor_before, 'machine_floor_after': floor_after,
+           'pdplus_gc_over_2ms': {'count': len(gc_ms), 'max_ms': max(gc_ms, default=None)},
            'stops_per_minute': round(len(platform_stops) / run_minutes, 2)
            if run_minutes == run_minutes and run_minutes > 0 else None,
            'load_average_1_5_15_min_at_start': load_start}
