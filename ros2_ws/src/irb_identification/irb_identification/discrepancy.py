@@ -73,9 +73,11 @@ def main(args=None) -> int:
             if why:
                 raise ValueError(why)
         out = Path(opts.out)
-        out.mkdir(parents=True, exist_ok=True)
+        if out.exists() and not out.is_dir():
+            raise ValueError(f'--out {out} exists and is not a directory')
         result = run_workflow(bags, opts.model, config, holdout,
                               log=lambda s: print(f'discrepancy: {s}'))
+        out.mkdir(parents=True, exist_ok=True)      # only for a result: no empty folder
     except (BagError, FrictionMapError, ValueError, OSError, TypeError, KeyError) as exc:
         print(f'discrepancy: {exc}', file=sys.stderr)
         return 1
