@@ -381,6 +381,8 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
                                                           if x['latency_ms_p50']])),
                 'pdplus_step_ms_max': max(x['pdplus_step_ms_max'] or 0.0 for x in w)}
     modes = [int(m.mode) for _, m in steps]
+    stops = sum(1 for a, b in zip(modes, modes[1:])
+                if b == ControllerState.MODE_STOPPED and a != b)
     out = {'benchmark': 'handover: the 248 Hz loop while plans arrive and during enable '
                         '(simulator real time + pdplus; unanswered states and state -> command '
                         "latency from the simulator's own per-state record)",
@@ -392,7 +394,9 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
            # the host's own stalls against the run's stops, per minute
            'machine_floor_before': floor_before, 'machine_floor_after': floor_after,
            'pdplus_gc_over_2ms': {'count': len(gc_ms), 'max_ms': max(gc_ms, default=None)},
-           'stops_per_minute': round(len(platform_stops) / run_minutes, 2)
+           # stops = pdplus's controller_state entering STOPPED (its own or the drive's)
+           'stops': stops, 'run_minutes': round(run_minutes, 3),
+           'stops_per_minute': round(stops / run_minutes, 2)
            if run_minutes == run_minutes and run_minutes > 0 else None,
            'load_average_1_5_15_min_at_start': load_start}
     _write('handover' + (f'_rt{rt_priority}' if rt_priority else ''), out)
