@@ -17,6 +17,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='discrepancy', description=__doc__.split('\n\n')[0])
@@ -51,9 +53,7 @@ def default_config_path() -> Path | None:
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     opts = _parser().parse_args(argv)
     from dataclasses import replace
 
