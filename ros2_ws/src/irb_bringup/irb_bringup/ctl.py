@@ -191,11 +191,19 @@ def status(a, ros_args) -> int:
         latched = {'plan': core.join_name(pdplus, 'plan_status'),
                    'axis': core.join_name(ns, 'axis_status')}
 
+        matched_at = []
+
         def latched_in():
             """Every latched topic that has a publisher has delivered its last message
-            (matching alone does not mean the transient-local sample has arrived yet)."""
-            return all(key in last or s.node.count_publishers(topic) == 0
-                       for key, topic in latched.items())
+            (matching alone does not mean the transient-local sample has arrived yet), or
+            SETTLE_S has passed since everything matched: a publisher that has published
+            nothing yet (pdplus before its first plan) delivers nothing to wait for."""
+            if all(key in last or s.node.count_publishers(topic) == 0
+                   for key, topic in latched.items()):
+                return True
+            if not matched_at:
+                matched_at.append(time.monotonic())
+            return time.monotonic() - matched_at[0] >= SETTLE_S
         seen, services, drives = _discover(
             s, a.pdplus, a.timeout,
             lambda found, settled: (_ready('status')(found, settled) and matched()

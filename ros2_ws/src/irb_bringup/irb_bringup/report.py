@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 
 def parse_args(argv):
     p = argparse.ArgumentParser(prog='report', description=__doc__,
@@ -46,9 +48,7 @@ def load_plan(name: str):
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     a = parse_args(argv)
     t_start = time.monotonic()
 

@@ -8,6 +8,7 @@ import math
 import os
 import re
 import threading
+import time
 
 import pytest
 from irb_bringup import ctl_core as core
@@ -236,8 +237,12 @@ def test_status_of_the_real_simulator_and_pdplus(tmp_path, capsys):
              for exe, extra in (('simulator', ['-p', 'mode:=realtime']),
                                 ('pdplus', ['-p', 'auto_enable:=false']))]
     try:
+        t0 = time.monotonic()
         assert main(['status', '--pdplus', f'{ns}/pdplus', '--timeout', '60',
                      '--window', '0.5']) == 0
+        # nothing to wait for once the graph is there: a pdplus that has no plan yet has
+        # published nothing on its latched plan_status (status waited for its timeout)
+        assert time.monotonic() - t0 < 45.0
         out = capsys.readouterr().out
         assert out.startswith(f'pdplus {ns}/pdplus: mode idle  (missed deadlines ')
         assert re.search(r'services: enable, (.+, )?stop', out), out   # others may come

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -194,7 +195,18 @@ def _plan_20k(model, spec: dict, points: int, duration: float, stamp_sec: int):
     return msg
 
 
-def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -> dict:
+def _machine_floor(seconds: float, rt_priority: int) -> dict | None:
+    """machine_floor.py in its own process (the loop's scheduling): the host's own stalls."""
+    if seconds <= 0:
+        return None
+    r = subprocess.run([sys.executable, str(Path(__file__).with_name('machine_floor.py')),
+                        '--seconds', str(seconds), '--priority', str(rt_priority)],
+                       capture_output=True, text=True, timeout=seconds + 60)
+    return json.loads(r.stdout) if r.returncode == 0 else {'error': r.stderr.strip()[-300:]}
+
+
+def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
+                   floor_s: float = 20.0) -> dict:
     """simulator (real time) + pdplus as processes; a listener records every joint state and
     every torque command (reliable, bytes only) with its arrival time. ``cycles`` times, while
     pdplus holds the end of the previous motion: a ``points``-point plan on a new path is
@@ -217,13 +229,14 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
              {'type': 'arc', 'center': [0.65, 0.0, 0.25], 'normal': [0.0, 0.0, 1.0],
               'radius': 0.08, 'start_angle': 0.0, 'sweep': 3.0}]
     plans = [_plan_20k(model, paths[k % 2], points, 3.0, 100 + k) for k in range(cycles)]
+    floor_before = _machine_floor(floor_s, rt_priority)
     ns = f'/handover{os.getpid()}'
     RESULTS.mkdir(parents=True, exist_ok=True)
     common = ['--ros-args', '-r', f'__ns:={ns}', '-p', f'realtime_priority:={rt_priority}']
     logs = {n: open(RESULTS / f'handover_{n}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
                              '-p', 'profile_duration_s:=3.0', '-p', 'auto_enable:=false',
-                             '-p', f'max_plan_points:={points}'],
+                             '-p', f'max_plan_points:={points}', '-p', 'gc_report_ms:=2.0'],
                             stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim_stats = RESULTS / 'handover_simulator_stats.json'
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
@@ -325,6 +338,11 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
         node.destroy_node()
         rclpy.try_shutdown()
     steps = [(t, deserialize_message(b, ControllerState)) for t, b in cs]
+    run_minutes = (steps[-1][0] - steps[0][0]) / 60.0 if len(steps) > 1 else float('nan')
+    floor_after = _machine_floor(floor_s, rt_priority)
+    # pdplus's garbage collections over 2 ms (gc_report_ms), from its log
+    gc_ms = [float(x) for x in re.findall(r'collection took ([0-9.]+) ms',
+                                          (RESULTS / 'handover_pdplus.log').read_text())]
 
     # the simulator's own record: when each state went out and when its answer came back
     # (CLOCK_MONOTONIC, the same clock in every process of the host; the listener's arrival
@@ -355,11 +373,16 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
             summary[kind] = {
                 'windows': len(w), 'unanswered_total': sum(x['unanswered'] for x in w),
                 'windows_with_unanswered': sum(1 for x in w if x['unanswered']),
+                'unanswered_per_1000_states': round(
+                    1e3 * sum(x['unanswered'] for x in w) / max(1, sum(x['states'] for x in w)),
+                    2),
                 'latency_ms_max': max(x['latency_ms_max'] or 0.0 for x in w),
                 'latency_ms_p50_median': float(np.median([x['latency_ms_p50'] for x in w
                                                           if x['latency_ms_p50']])),
                 'pdplus_step_ms_max': max(x['pdplus_step_ms_max'] or 0.0 for x in w)}
     modes = [int(m.mode) for _, m in steps]
+    stops = sum(1 for a, b in zip(modes, modes[1:])
+                if b == ControllerState.MODE_STOPPED and a != b)
     out = {'benchmark': 'handover: the 248 Hz loop while plans arrive and during enable '
                         '(simulator real time + pdplus; unanswered states and state -> command '
                         "latency from the simulator's own per-state record)",
@@ -368,6 +391,13 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0) -
            'stops_and_refusals_seen': platform_stops,
            'stop_reasons': sorted({m.stop_reason for _, m in steps if m.stop_reason}),
            'modes_seen': sorted(set(modes)), 'summary': summary, 'windows': wins,
+           # the host's own stalls against the run's stops, per minute
+           'machine_floor_before': floor_before, 'machine_floor_after': floor_after,
+           'pdplus_gc_over_2ms': {'count': len(gc_ms), 'max_ms': max(gc_ms, default=None)},
+           # stops = pdplus's controller_state entering STOPPED (its own or the drive's)
+           'stops': stops, 'run_minutes': round(run_minutes, 3),
+           'stops_per_minute': round(stops / run_minutes, 2)
+           if run_minutes == run_minutes and run_minutes > 0 else None,
            'load_average_1_5_15_min_at_start': load_start}
     _write('handover' + (f'_rt{rt_priority}' if rt_priority else ''), out)
     return out
@@ -556,6 +586,8 @@ def main(argv=None):
     ap.add_argument('--handover-cycles', type=int, default=4)
     ap.add_argument('--handover-points', type=int, default=20000)
     ap.add_argument('--handover-rt-priority', type=int, default=0)
+    ap.add_argument('--handover-floor-seconds', type=float, default=20.0,
+                    help="the machine's own floor (machine_floor.py) before and after [s]")
     ap.add_argument('--loop-seconds', type=float, default=20.0)
     ap.add_argument('--loop-rt-priority', type=int, default=20,
                     help='realtime_priority of the second loop run (0: no second run)')
@@ -570,7 +602,8 @@ def main(argv=None):
     if a.which in ('loop', 'all'):
         bench_loop(a.loop_seconds, a.loop_rt_priority, a.loop_repeats)
     if a.which in ('handover', 'all'):
-        bench_handover(a.handover_cycles, a.handover_points, a.handover_rt_priority)
+        bench_handover(a.handover_cycles, a.handover_points, a.handover_rt_priority,
+                       a.handover_floor_seconds)
 
 
 if __name__ == '__main__':

@@ -184,6 +184,38 @@ def spin_with(executor_kind: str, realtime: tuple[int, list[int], int] = (0, [],
     return spin
 
 
+class GcWatch:
+    """Times every cyclic garbage collection of the process (``gc.callbacks``) and reports
+    those longer than ``limit_s`` through ``report(text)`` (a LogThread's ``warn``: never
+    written on the thread that collected). A collection runs on whichever thread allocated
+    when a generation's threshold was reached, the control thread included, and holds the
+    interpreter lock throughout: a diagnostic for steps far longer than their computation.
+    ``worst_s`` and ``count`` (collections over the limit) are kept for statistics."""
+
+    def __init__(self, limit_s: float, report):
+        import gc
+        self._gc, self.limit_s, self._report = gc, float(limit_s), report
+        self._t0 = 0.0
+        self.worst_s, self.count = 0.0, 0
+        gc.callbacks.append(self._cb)
+
+    def _cb(self, phase: str, info: dict) -> None:
+        if phase == 'start':
+            self._t0 = time.perf_counter()
+            return
+        dt = time.perf_counter() - self._t0
+        self.worst_s = max(self.worst_s, dt)
+        if dt > self.limit_s:
+            self.count += 1
+            self._report(f"gc: a generation-{info.get('generation')} collection took "
+                         f"{dt * 1e3:.2f} ms on thread {threading.current_thread().name} "
+                         f"({info.get('collected')} collected)")
+
+    def close(self) -> None:
+        if self._cb in self._gc.callbacks:
+            self._gc.callbacks.remove(self._cb)
+
+
 class LogThread:
     """A node's log lines written on a thread of their own.
 

@@ -32,8 +32,8 @@ from std_srvs.srv import Trigger
 
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
-from .node_util import (REALTIME_PARAMS, LogThread, declare_realtime, short_switch_interval,
-                        spin_with)
+from .node_util import (REALTIME_PARAMS, GcWatch, LogThread, declare_realtime,
+                        short_switch_interval, spin_with)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
@@ -122,6 +122,9 @@ SPEC = NodeSpec(
               'error'),
         Param('executor', 'events', '', "'events' (EventsExecutor, spin_once loop) or "
               "'single'"),
+        Param('gc_report_ms', 0.0, 'ms', 'diagnostic: log every garbage collection of the '
+              'process longer than this (they hold the interpreter lock on whichever thread '
+              'allocated, the control thread included); 0 = off'),
         *REALTIME_PARAMS),
     subscribes=(
         Topic('joint_states', 'sensor_msgs/JointState', 'q, qd of joint_1..3 (by name)'),
@@ -167,6 +170,8 @@ class PdPlusNode(Node):
         self.P = P
         # log lines are written on a thread of their own (LogThread: 1-2 ms each in rclpy)
         self.log = LogThread(lambda: self.get_logger())
+        self.gc_watch = (GcWatch(P['gc_report_ms'] * 1e-3, self.log.warn)
+                         if P['gc_report_ms'] > 0 else None)
         self.model = RobotModel.load()
         try:
             self.path = (load_path_file(P['path_file']) if P['path_file'] else
@@ -642,6 +647,8 @@ class PdPlusNode(Node):
         (self.log.info if ok else self.log.error)(text)
 
     def destroy_node(self):
+        if self.gc_watch is not None:
+            self.gc_watch.close()
         self.log.flush(2.0)
         self._closing.set()
         self._retired.put(None)

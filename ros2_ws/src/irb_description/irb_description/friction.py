@@ -308,8 +308,12 @@ def load_friction_map(path: str | Path, joint_names: list[str] | None = None,
         raise FrictionMapError(f'friction map {path} does not exist')
     try:
         data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise FrictionMapError(f'friction map {path} unreadable: {exc}') from exc
+    except OSError as exc:
+        raise FrictionMapError(f'friction map {path} unreadable: {exc.strerror}') from exc
+    except yaml.YAMLError as exc:
+        from irb_description.params import yaml_problem
+        raise FrictionMapError(f'friction map {path} is not YAML: {yaml_problem(exc)}') \
+            from exc
     if not isinstance(data, dict):
         raise FrictionMapError(f'friction map {path}: not a YAML mapping')
     return friction_map_from_dict(data, joint_names, allow_degenerate)

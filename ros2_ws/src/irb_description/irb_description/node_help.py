@@ -151,6 +151,14 @@ def param_table_md(spec: NodeSpec) -> str:
     return '\n'.join(rows)
 
 
+def own_args(args=None) -> list[str]:
+    """A command-line tool's own arguments: ``args`` (None: ``sys.argv[1:]``) up to any
+    ``--ros-args`` (``ros2 run`` and launch files may append ROS arguments to any
+    executable; a tool that takes none ignores them)."""
+    argv = list(sys.argv[1:] if args is None else args)
+    return argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+
+
 def wants_help(args=None) -> bool:
     """True when ``-h``/``--help`` stands among the program's own arguments (before any
     ``--ros-args``); ``args`` as ``main(args)`` gets them (None: ``sys.argv``, whose first
@@ -158,8 +166,7 @@ def wants_help(args=None) -> bool:
     argv = list(sys.argv[1:] if args is None else args)
     if argv and args is not None and argv[0] == sys.argv[0]:
         argv = argv[1:]
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(argv)
     return '-h' in argv or '--help' in argv
 
 

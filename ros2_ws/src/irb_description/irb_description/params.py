@@ -42,6 +42,14 @@ def urdf_path() -> Path:
     return share_dir() / 'urdf' / URDF_NAME
 
 
+def yaml_problem(exc: Exception) -> str:
+    """One line for a YAML parse error: what is wrong and where (line and column, 1-based),
+    e.g. "mapping values are not allowed here at line 3, column 9"."""
+    problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+    mark = getattr(exc, 'problem_mark', None)
+    return problem + (f' at line {mark.line + 1}, column {mark.column + 1}' if mark else '')
+
+
 def _load_yaml(path: Path) -> dict:
     with open(path, encoding='utf-8') as f:
         data = yaml.safe_load(f)

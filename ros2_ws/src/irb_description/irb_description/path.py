@@ -723,7 +723,8 @@ def read_path_spec(name):
     except OSError as exc:
         raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
     except yaml.YAMLError as exc:
-        raise ValueError(f'path file {name} is not YAML: {str(exc).splitlines()[0]}') from None
+        from irb_description.params import yaml_problem
+        raise ValueError(f'path file {name} is not YAML: {yaml_problem(exc)}') from None
 
 
 def load_path_file(name) -> PathBase:

@@ -62,7 +62,7 @@ def test_casadi_torque_matches_numpy_away_from_zero(model):
     ('friction_map: {joints: {joint_1: {coulomb: 1, viscous: 1}}}', 'no entry'),
     ('friction_map: {joints: {joint_1: {coulomb: x, viscous: 1}, joint_2: {}, joint_3: {}}}',
      'joint_1'),
-    ('[1, 2', 'unreadable'),
+    ('[1, 2', r'not YAML: .* at line 1, column 6'),
     ('- 1\n- 2\n', 'mapping'),
 ])
 def test_bad_files_give_clear_errors(tmp_path, model, text, reason):

@@ -241,3 +241,11 @@ def test_tracker_does_not_jump_to_a_near_part_of_the_path():
         prev = tr.update(x, prev)
         assert abs((prev - t + np.pi) % (2 * np.pi) - np.pi) < 1e-6
     assert CirclePath  # the circle keeps its own atan2 (tested in irb_control)
+
+
+def test_a_path_file_that_is_not_yaml_names_line_and_column(tmp_path):
+    from irb_description.path import load_path_file
+    f = tmp_path / 'bad.yaml'
+    f.write_text('type: line\nwaypoints: [[0.5, 0, 0.3]\n  bad: x\n')
+    with pytest.raises(ValueError, match=r'bad.yaml is not YAML: .* at line 3, column 3$'):
+        load_path_file(f)

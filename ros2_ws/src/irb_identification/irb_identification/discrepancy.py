@@ -17,6 +17,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='discrepancy', description=__doc__.split('\n\n')[0])
@@ -51,9 +53,7 @@ def default_config_path() -> Path | None:
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     opts = _parser().parse_args(argv)
     from dataclasses import replace
 
@@ -73,9 +73,11 @@ def main(args=None) -> int:
             if why:
                 raise ValueError(why)
         out = Path(opts.out)
-        out.mkdir(parents=True, exist_ok=True)
+        if out.exists() and not out.is_dir():
+            raise ValueError(f'--out {out} exists and is not a directory')
         result = run_workflow(bags, opts.model, config, holdout,
                               log=lambda s: print(f'discrepancy: {s}'))
+        out.mkdir(parents=True, exist_ok=True)      # only for a result: no empty folder
     except (BagError, FrictionMapError, ValueError, OSError, TypeError, KeyError) as exc:
         print(f'discrepancy: {exc}', file=sys.stderr)
         return 1

@@ -19,6 +19,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 
 def _floats(text: str, what: str, n: int = 3) -> tuple:
     """'a' or 'a,b,c' -> (3,) floats; ValueError with a clear message."""
@@ -51,9 +53,7 @@ def parse_effect(item: str, names) -> tuple[str, float]:
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     p = argparse.ArgumentParser(prog='excite', description=__doc__.split('\n\n')[0])
     p.add_argument('--out', required=True, help='directory for the bags (must not exist)')
     p.add_argument('--plan', default='short', help='plan name in config/excitation.yaml')

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import yaml
 
+from irb_description.node_help import own_args
+
 from .bagio import BagError
 from .friction_fit import FitConfig, IdentificationError, friction_map
 from .gaps import ON_GAP, GapConfig, GapError
@@ -107,9 +109,7 @@ def _read_accel(bag: str):
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     opts = _parser().parse_args(argv)
     report = {'out': opts.out, 'bags': opts.bag, 'problems': [], 'joints': {},
               'effort_lag_s': opts.effort_lag_s, 'method_requested': opts.method,

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from irb_description.node_help import own_args
+
 TORQUE_KIND_KEY = 'irb_identification.torque_kind'
 ACCEL_TOPIC = '/joint_accelerations'
 
@@ -217,9 +219,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(args=None) -> int:
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     opts = _parser().parse_args(argv)
     try:
         joints = [parse_joint(s) for s in opts.joint]

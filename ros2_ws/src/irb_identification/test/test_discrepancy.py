@@ -148,4 +148,10 @@ def test_cli_end_to_end(model, plant_yaml, tmp_path):
 def test_cli_bad_input(tmp_path, plant_yaml):
     assert discrepancy.main(['--bag', str(tmp_path / 'missing'), '--model', str(plant_yaml),
                              '--out', str(tmp_path / 'o')]) == 1
+    assert not (tmp_path / 'o').exists()        # a refusal leaves no empty report folder
+    empty = tmp_path / 'empty_bag'
+    empty.mkdir()
+    assert discrepancy.main(['--bag', str(empty), '--model', str(plant_yaml),
+                             '--out', str(tmp_path / 'o2' / 'deeper')]) == 1
+    assert not (tmp_path / 'o2').exists()
     assert excite.main(['--out', str(tmp_path / 'x'), '--effect', 'gremlins']) == 1

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from irb_description.params import yaml_problem
 from irb_description.power_modes import HOLD, MODES, PowerModes
 
 OP_MOTION, OP_FIXED, OP_WAIT = 'motion', 'fixed', 'wait'
@@ -175,7 +176,7 @@ def parse_cycle(data, source: str = 'cycle', base_dir: Path | None = None) -> Cy
                     raise _err(where, f'cannot read path_file {f}: {exc.strerror}') from None
                 except yaml.YAMLError as exc:
                     raise _err(where, f'path_file {f} is not YAML: '
-                               f'{str(exc).splitlines()[0]}') from None
+                               f'{yaml_problem(exc)}') from None
             try:
                 path_from_spec(spec)
                 process = process_from_spec(spec)
@@ -218,7 +219,7 @@ def load_cycle(path) -> CycleSpec:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise CycleError(f'cycle file {p} is not YAML: {str(exc).splitlines()[0]}') from None
+        raise CycleError(f'cycle file {p} is not YAML: {yaml_problem(exc)}') from None
     return parse_cycle(data, str(p), p.parent)
 
 

@@ -18,6 +18,8 @@ import sys
 
 import numpy as np
 
+from irb_description.node_help import own_args
+
 from .placement import (PLACEMENT_MIN_DURATION_CHECK_FACTOR, Region, bound_gap_pct,
                         coverage, plot_map, search, task_fixed_electrical_energy)
 from .request import ENERGY_MODELS, PlanRequest
@@ -218,9 +220,7 @@ def ask_node(a, region: Region, args=None) -> int:
 
 
 def main(args=None):
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     a = parse_args(argv)
     try:
         region = Region(np.array(a.lo), np.array(a.hi), tuple(np.radians(a.rotations)),
