@@ -36,10 +36,23 @@ def test_output_is_prefixed_and_stop_is_clean():
     assert '[a] ready' in out.getvalue() and '[b] ready' in out.getvalue()
 
 
-def test_a_failing_required_process_is_reported():
+def test_a_failing_required_process_is_reported(tmp_path):
     out = io.StringIO()
-    crash = (PY, '-c', 'import sys; print("boom", flush=True); sys.exit(3)')
-    group = ProcessGroup([ProcessSpec('ok', SLEEPER), ProcessSpec('bad', crash)],
+    # 'bad' fails only once 'ok' has its SIGINT handler (a stop that reaches a process still
+    # starting up ends it with Python's KeyboardInterrupt, exit 1: the fresh-clone CI at
+    # load 6 met that); both wait on a marker file, bounded
+    mark = tmp_path / 'ok_ready'
+    ok = (PY, '-c', 'import pathlib, signal, sys, time\n'
+          'signal.signal(signal.SIGINT, lambda *a: sys.exit(0))\n'
+          f'pathlib.Path({str(mark)!r}).touch()\n'
+          'print("ready", flush=True)\n'
+          'while True: time.sleep(0.05)')
+    crash = (PY, '-c', 'import pathlib, sys, time\n'
+             'end = time.monotonic() + 60\n'
+             f'while not pathlib.Path({str(mark)!r}).exists() and time.monotonic() < end:\n'
+             '    time.sleep(0.01)\n'
+             'print("boom", flush=True); sys.exit(3)')
+    group = ProcessGroup([ProcessSpec('ok', ok), ProcessSpec('bad', crash)],
                          lambda m: None, out)
     with group:
         assert not group.wait_until(lambda: False, timeout_s=30)
