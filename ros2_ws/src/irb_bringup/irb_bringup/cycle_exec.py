@@ -87,6 +87,7 @@ class CyclePlanRun:
     cycle_file: str = ''
     power_modes_file: str = ''
     source: str = ''
+    electrical_config: str = ''      # the planner's electrical model ('' = irb_description's)
 
     @property
     def motions(self) -> list:
@@ -167,7 +168,7 @@ def load_plan(path) -> CyclePlanRun:
         except (OSError, ValueError):
             pm_file = ''
     return CyclePlanRun(takt, model.split('_', 1)[1], float(data['energy_j']), tuple(steps),
-                        str(cf), pm_file, str(f))
+                        str(cf), pm_file, str(f), str(data.get('electrical_config', '') or ''))
 
 
 # --- the timed sequence -----------------------------------------------------------------------
@@ -272,15 +273,18 @@ class Models:
         return holding_power_w(e, np.asarray(self.gravity(np.asarray(q, float)), float))
 
 
-def load_models(power_modes_file: str = '', plant_electrical_file: str = '') -> Models:
-    """The planner's electrical model (irb_description config/electrical.yaml), the plant's
-    (irb_control config/plant_electrical.yaml or the given file), power modes on both."""
+def load_models(power_modes_file: str = '', plant_electrical_file: str = '',
+                planner_electrical_file: str = '') -> Models:
+    """The planner's electrical model (the given file, else irb_description's
+    config/electrical.yaml), the plant's (irb_control config/plant_electrical.yaml or the
+    given file), power modes on both."""
     from irb_description.electrical import load_electrical
     from irb_description.model import RobotModel
     from irb_description.power_modes import load_power_modes
     model = RobotModel.load()
     n = len(model.joint_names)
-    nom = load_electrical().axes(n)
+    nom = load_electrical(Path(planner_electrical_file) if planner_electrical_file
+                          else None).axes(n)
     if plant_electrical_file:
         pf = Path(plant_electrical_file)
     else:

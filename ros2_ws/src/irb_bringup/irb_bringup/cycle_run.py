@@ -43,19 +43,27 @@ def parse_args(argv):
                    'pdplus instead of bringing them up')
     p.add_argument('--warmup', type=int, default=-1, help='cycles run first and not '
                    'measured (default: 0, or 1 with --attach)')
-    p.add_argument('--sim-mode', default='lockstep', choices=('lockstep', 'paced'),
-                   help="simulator mode when brought up (default lockstep)")
+    p.add_argument('--sim-mode', default='paced', choices=('lockstep', 'paced'),
+                   help="simulator mode when brought up: 'paced' (default: lockstep on /clock, "
+                   "every state answered, simulated time at most --rate x the wall clock) or "
+                   "'lockstep' (as fast as pdplus answers, and unbounded while the drives are "
+                   'off in a deeper mode: the requests of a station then land later)')
+    p.add_argument('--rate', type=float, default=1.0,
+                   help='paced: simulated seconds per wall-clock second (default 1)')
     p.add_argument('--ramp-s', type=float, default=0.1,
                    help="[s] pdplus's shortest ramp from hold to a plan's start when brought "
                    'up (the robot is at the start already; default 0.1, pdplus\'s own 0.5)')
     p.add_argument('--step-timeout', type=float, default=120.0,
                    help='[s] wall time a step may take before the run is abandoned')
+    p.add_argument('--plant-electrical', default='',
+                   help="the simulator's electrical parameters (plant_electrical_file; '' = "
+                   "irb_control's config/plant_electrical.yaml): the predictions' plant model")
     p.add_argument('--pdplus', default='pdplus', help="pdplus's node name (default pdplus)")
     p.add_argument('--no-plot', action='store_true', help='write no PNG')
     p.add_argument('--verbose', action='store_true', help="echo the nodes' output")
     a = p.parse_args(argv)
-    if a.cycles < 1 or a.ramp_s <= 0 or a.step_timeout <= 0:
-        p.error('--cycles must be >= 1, --ramp-s and --step-timeout > 0')
+    if a.cycles < 1 or a.ramp_s <= 0 or a.step_timeout <= 0 or a.rate <= 0:
+        p.error('--cycles must be >= 1, --ramp-s, --step-timeout and --rate > 0')
     if a.warmup < 0:
         a.warmup = 1 if a.attach else 0
     return a
@@ -370,27 +378,34 @@ def run(a, plan, out: Path) -> int:
 
     def say(text):
         print(f'[cycle_run {time.monotonic() - t_start:6.1f} s] {text}', flush=True)
-    models = load_models(plan.power_modes_file)
+    models = load_models(plan.power_modes_file, a.plant_electrical,
+                         plan.electrical_config)
     preds = plan_predictions(plan, models)
     say(f'plan {plan.source}: {len(plan.steps)} steps, takt {plan.takt_s:g} s, '
         f'{plan.energy_j:.1f} J per cycle planned ({plan.bus} bus); on the plant\'s '
         f'electrical model {sum(p["plant_model_j"] for p in preds):.1f} J')
     group = None
     runner = None
+    tail = []
     stops, result, rc = [], None, 0
     try:
         if not a.attach:
             from irb_control.process_group import ProcessGroup, ProcessSpec, ros2_run_cmd
             q0 = plan.motions[0].q_start
-            sim = ProcessSpec('simulator', ros2_run_cmd('irb_control', 'simulator', params={
-                'mode': a.sim_mode, 'lockstep_wait_s': 0.5,
-                'initial_positions': str([float(x) for x in q0])}))
+            sp = {'mode': a.sim_mode, 'lockstep_wait_s': 0.5, 'lockstep_rate': float(a.rate),
+                  'initial_positions': str([float(x) for x in q0])}
+            if a.plant_electrical:
+                sp['plant_electrical_file'] = a.plant_electrical
+            sim = ProcessSpec('simulator', ros2_run_cmd('irb_control', 'simulator',
+                                                        params=sp))
             pd = ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', params={
                 'use_sim_time': True, 'auto_enable': False, 'builtin_profile': 'none',
                 'ramp_min_duration_s': float(a.ramp_s)}))
 
             class Echo:
                 def write(self, text):
+                    tail.append(text)
+                    del tail[:-20]
                     if a.verbose:
                         sys.stdout.write(text)
 
@@ -412,6 +427,8 @@ def run(a, plan, out: Path) -> int:
                     group)
     except RunFailed as exc:
         say(f'FAILED: {exc}')
+        if group is not None and group.failed and not a.verbose:
+            sys.stderr.write(''.join(tail[-10:]))
         stops = [runner.stop_reason] if runner is not None and runner.stop_reason else []
         ex, rc = None, 1
     finally:
@@ -450,7 +467,9 @@ def run(a, plan, out: Path) -> int:
             rc = 1
     summary = summarise(cycles, plan, sags, stops)
     load = ' '.join(f'{x:.1f}' for x in os.getloadavg())
-    result = {'plan': plan.source, 'sim_mode': 'attached' if a.attach else a.sim_mode,
+    result = {'plan': plan.source,
+              'sim_mode': 'attached' if a.attach else a.sim_mode + (
+                  f' at {a.rate:g}x' if a.sim_mode == 'paced' else ''),
               'ramp_s': a.ramp_s, 'warmup': a.warmup, 'cycles_requested': a.cycles,
               'wall_time_s': time.monotonic() - t_start, 'load': load,
               'summary': summary, 'plan_predictions': preds, 'cycles': cycles,
