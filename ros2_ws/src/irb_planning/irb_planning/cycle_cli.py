@@ -42,6 +42,10 @@ def parse_args(argv):
                    help="electrical-model YAML the plans and the power modes use ('' = "
                    "irb_description's config/electrical.yaml); e.g. the simulator's "
                    'irb_control config/plant_electrical.yaml to plan for that plant')
+    p.add_argument('--limit-scaling', type=float, default=0.0,
+                   help="fraction of the torque and speed limits the motions' plans use "
+                   "(0 = the file's limit_scaling, else 1); 0.9 leaves pdplus the headroom "
+                   'it asks of a plan (its plan_torque_fraction)')
     p.add_argument('--no-plots', action='store_true', help='write no PNG')
     return p.parse_args(argv)
 
@@ -101,6 +105,7 @@ def write_outputs(plan, out: Path, plots: bool, electrical: str = '') -> dict:
     summary['cycle_file'] = plan.spec.source
     summary['energy_model'] = plan.energy_model
     summary['electrical_config'] = str(electrical)   # '' = irb_description's electrical.yaml
+    summary['limit_scaling'] = plan.spec.limit_scaling or 1.0
     summary['fronts'] = {n: {'durations_s': sorted(f.points),
                              'energies_j': [f.points[d]['energy_j'] for d in sorted(f.points)],
                              'time_optimal_s': f.fastest['duration_s'],
@@ -125,6 +130,11 @@ def main(args=None):
         spec = load_cycle(a.cycle)
         if a.takt < 0 or not a.check_rate > 0 or a.jobs < 1:
             raise CycleError('--takt must be >= 0, --check-rate > 0 and --jobs >= 1')
+        if not 0 <= a.limit_scaling <= 1:
+            raise CycleError('--limit-scaling must be in [0, 1] (0 = the file\'s)')
+        if a.limit_scaling:
+            from dataclasses import replace
+            spec = replace(spec, limit_scaling=a.limit_scaling)
         if a.electrical and not Path(a.electrical).is_file():
             raise CycleError(f'--electrical: no file {a.electrical}')
     except CycleError as exc:
