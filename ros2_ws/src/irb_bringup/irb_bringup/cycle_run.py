@@ -249,14 +249,17 @@ class Runner:
 
 
 def execute(runner: Runner, plan, modes, cycles: int, warmup: int, timeout: float, group,
-            say) -> dict:
-    """Run warmup + cycles cycles; returns the events (per measured cycle, per step
-    StepEvents), the cycle windows, the brake releases (simulated times) and the stops."""
+            say, rec: dict) -> None:
+    """Run warmup + cycles cycles; ``rec`` collects, cycle by cycle, the events (per step
+    StepEvents), the cycle windows, the brake releases and the lateness of the timed
+    requests [simulated s] (``finish`` turns it into the result, of a failed run too)."""
     from .cycle_exec import MOTION, StepEvents, schedule
     acts = schedule(plan, modes)
     steps = plan.steps
     state = {'sent': {}, 'stamp': time.time_ns()}
     releases, cycles_ev, windows, late = [], [], [], []
+    rec.update(cycles_ev=cycles_ev, windows=windows, releases=releases, late=late,
+               holds={}, steps=steps, warmup=warmup)
     r = runner
 
     def send(i):
@@ -329,20 +332,33 @@ def execute(runner: Runner, plan, modes, cycles: int, warmup: int, timeout: floa
                                    t_hold=t_hold.get(i))
         windows.append((t_cycle, t_next))
         cycles_ev.append(ev)
+        rec['holds'] = holds
         say(f'cycle {k + 1}/{warmup + cycles}{" (warm-up)" if k < warmup else ""} done at '
             f'{r.now:.2f} s simulated')
         t_cycle = t_next
+
+
+def finish(rec: dict) -> dict | None:
+    """The completed cycles of ``rec`` (after the warm-up): events with every step's window
+    closed (each step ends where the next starts, a motion's hold at its end being its own;
+    the last cycle's last step at its cycle's end or its motion's end), windows, releases,
+    lateness; None without a completed measured cycle."""
+    from .cycle_exec import MOTION
+    cycles_ev, windows, warmup = rec.get('cycles_ev', []), rec.get('windows', []), \
+        rec.get('warmup', 0)
+    if len(windows) <= warmup:
+        return None
+    steps, holds = rec['steps'], rec['holds']
     end = windows[-1][1]
     if steps[-1].kind == MOTION and holds.get(len(steps) - 1, end) > end:
         end = holds[len(steps) - 1]          # the last motion ran past its cycle's end
-    # each step ends where the next starts (a motion's hold at its end until then is its
-    # own); the last cycle's last step at its cycle's end
     flat = [e for ev in cycles_ev for e in ev]
     for j, e in enumerate(flat):
         e.t1 = flat[j + 1].t0 if j + 1 < len(flat) else end
+    late = rec['late']
     return {'events': cycles_ev[warmup:], 'windows': windows[warmup:],
-            'releases': releases, 'end_s': max(end, windows[-1][1]),
-            'late_s': late[len(late) * warmup // (warmup + cycles):]}
+            'releases': rec['releases'], 'end_s': max(end, windows[-1][1]),
+            'late_s': late[len(late) * warmup // len(windows):]}
 
 
 def main(args=None):
@@ -387,6 +403,7 @@ def run(a, plan, out: Path) -> int:
     group = None
     runner = None
     tail = []
+    rec = {}
     stops, result, rc = [], None, 0
     try:
         if not a.attach:
@@ -420,8 +437,9 @@ def run(a, plan, out: Path) -> int:
                     'waiting for the simulator (axis_status, joint_states)', group)
         runner.wait(lambda: runner.mode is not None, 60.0, 'waiting for pdplus', group)
         say(f'graph up; running {a.warmup} warm-up + {a.cycles} measured cycles')
-        ex = execute(runner, plan, models.plant_modes, a.cycles, a.warmup, a.step_timeout,
-                     group, say)
+        execute(runner, plan, models.plant_modes, a.cycles, a.warmup, a.step_timeout,
+                group, say, rec)
+        ex = finish(rec)
         runner.wait(lambda: runner.p_t and runner.p_t[-1] >= ex['end_s'] and
                     runner.q_t[-1] >= ex['end_s'], 60.0, 'waiting for the last samples',
                     group)
@@ -430,7 +448,9 @@ def run(a, plan, out: Path) -> int:
         if group is not None and group.failed and not a.verbose:
             sys.stderr.write(''.join(tail[-10:]))
         stops = [runner.stop_reason] if runner is not None and runner.stop_reason else []
-        ex, rc = None, 1
+        ex, rc = finish(rec), 1
+        if ex is not None:
+            say(f'the {len(ex["windows"])} cycles completed before are measured')
     finally:
         if runner is not None:
             with runner.cv:
@@ -454,8 +474,15 @@ def run(a, plan, out: Path) -> int:
             if gap is not None:
                 raise CycleRunError(f'electrical_power lost samples: a gap of {gap[1]:.4f} s '
                                     f'at {gap[0]:.4f} s')
-            for ev, win in zip(ex['events'], ex['windows']):
-                cycles.append(compare_cycle(plan, models, preds, ev, win, pt, pw, PERIOD_S))
+            for k, (ev, win) in enumerate(zip(ex['events'], ex['windows'])):
+                try:
+                    cycles.append(compare_cycle(plan, models, preds, ev, win, pt, pw,
+                                                PERIOD_S))
+                except CycleRunError as exc:
+                    if rc == 0:
+                        raise
+                    say(f'cycle {k + 1} not measured: {exc}')
+                    break
             ends = [e.t0 for ev in ex['events'] for e in ev] + [ex['end_s']]
             for t_rel in ex['releases']:
                 if t_rel < lo:
