@@ -30,6 +30,8 @@ EXAMPLE = ('ros2 run irb_planning cycle --cycle $(ros2 pkg prefix irb_planning)/
            'irb_planning/config/cycle_gluing.yaml --out cyc && '
            'ros2 run irb_bringup cycle_run --plan cyc --cycles 3 --out cyc_run')
 PERIOD_S = 0.004032
+#: [rad/s] a deeper mode is requested once every joint is slower (pdplus refuses at 0.01)
+REST_SPEED = 0.008
 
 
 def parse_args(argv):
@@ -55,6 +57,10 @@ def parse_args(argv):
                    'up (the robot is at the start already; default 0.1, pdplus\'s own 0.5)')
     p.add_argument('--step-timeout', type=float, default=120.0,
                    help='[s] wall time a step may take before the run is abandoned')
+    p.add_argument('--friction-map', default='',
+                   help="friction map for pdplus's compensation when brought up ('' = its "
+                   "nominal); e.g. an identified map, or irb_control's config/plant.yaml "
+                   "(the simulated plant's own: a perfect identification)")
     p.add_argument('--plant-electrical', default='',
                    help="the simulator's electrical parameters (plant_electrical_file; '' = "
                    "irb_control's config/plant_electrical.yaml): the predictions' plant model")
@@ -116,6 +122,7 @@ class Runner:
         self.modes = []                 # (stamp, mode, reason) on change
         self.mode, self.stop_reason = None, ''
         self.now = 0.0                  # simulated time of the newest joint state [s]
+        self.speed = float('inf')       # its largest joint speed [rad/s]
         self.axis = None
         self.plan_status = None
         self._dec_p, self._dec_q = JointStateDecoder(), JointStateDecoder()
@@ -163,7 +170,7 @@ class Runner:
             self.p_w.append(effort[self._p_idx])
 
     def _on_joints(self, data):
-        sec, nsec, names, pos, _, _ = self._dec_q.decode(data)
+        sec, nsec, names, pos, vel, _ = self._dec_q.decode(data)
         if self._q_idx is None:
             self._q_idx = [names.index(f'joint_{k}') for k in (1, 2, 3)]
         i = self._q_idx
@@ -171,6 +178,8 @@ class Runner:
             self.now = sec + nsec * 1e-9
             self.q_t.append(self.now)
             self.q.append((pos[i[0]], pos[i[1]], pos[i[2]]))
+            if len(vel) == len(pos):
+                self.speed = max(abs(vel[i[0]]), abs(vel[i[1]]), abs(vel[i[2]]))
             self.cv.notify_all()
 
     def _on_state(self, data):
@@ -207,18 +216,25 @@ class Runner:
                     raise RunFailed(f'timeout ({timeout_s:g} s wall) while {what}')
                 self.cv.wait(min(left, 0.2))
 
-    def call(self, name: str, timeout_s: float, group=None) -> str:
+    def call(self, name: str, timeout_s: float, group=None, retry_if: str = '') -> str:
+        """Call pdplus/<name>; a refusal whose text holds ``retry_if`` is asked again on the
+        next joint state (until ``timeout_s``), any other is RunFailed."""
         c = self.clients[name]
         self.wait(c.service_is_ready, timeout_s, f'waiting for pdplus/{name}', group)
-        fut = c.call_async(self.Trigger.Request())
-        done = threading.Event()
-        fut.add_done_callback(lambda f: done.set())
-        if not done.wait(timeout_s):
-            raise RunFailed(f'pdplus/{name} gave no answer in {timeout_s:g} s')
-        r = fut.result()
-        if not r.success:
-            raise RunFailed(f'pdplus/{name} refused: {r.message}')
-        return r.message
+        deadline = time.monotonic() + timeout_s
+        while True:
+            fut = c.call_async(self.Trigger.Request())
+            done = threading.Event()
+            fut.add_done_callback(lambda f: done.set())
+            if not done.wait(timeout_s):
+                raise RunFailed(f'pdplus/{name} gave no answer in {timeout_s:g} s')
+            r = fut.result()
+            if r.success:
+                return r.message
+            if not retry_if or retry_if not in r.message or time.monotonic() > deadline:
+                raise RunFailed(f'pdplus/{name} refused: {r.message}')
+            t = self.now
+            self.wait(lambda: self.now > t, timeout_s, f'retrying pdplus/{name}', group)
 
     def send_plan(self, step, stamp_ns: int):
         from irb_description.plan_path import path_frame_id
@@ -315,9 +331,14 @@ def execute(runner: Runner, plan, modes, cycles: int, warmup: int, timeout: floa
                     until(t_cycle + a.t_s, f'waiting in {s.mode} at {s.name}')
                     t_hold[a.step] = r.now
                     releases.append(r.now)
+                    r.call('power_hold', timeout, group)
                 else:
+                    # brakes only at rest: a fast motion's end is declared (theta at the
+                    # end) while the arm still settles; pdplus checks |qd| < 0.01 rad/s
+                    r.wait(lambda: r.speed < REST_SPEED, timeout,
+                           f'waiting for rest before {a.mode} at {s.name}', group)
                     t_mode[a.step] = r.now
-                r.call(f'power_{a.mode}', timeout, group)
+                    r.call(f'power_{a.mode}', timeout, group, retry_if='not at rest')
             elif a.kind == 'released':
                 r.wait(lambda: r.axis is not None and not r.axis.brakes_engaged
                        and r.mode == 5, timeout, f'waiting for the brakes to open at '
@@ -417,7 +438,9 @@ def run(a, plan, out: Path) -> int:
                                                         params=sp))
             pd = ProcessSpec('pdplus', ros2_run_cmd('irb_control', 'pdplus', params={
                 'use_sim_time': True, 'auto_enable': False, 'builtin_profile': 'none',
-                'ramp_min_duration_s': float(a.ramp_s)}))
+                'ramp_min_duration_s': float(a.ramp_s),
+                **({'friction_mode': 'file', 'friction_map_file': a.friction_map}
+                   if a.friction_map else {})}))
 
             class Echo:
                 def write(self, text):
@@ -497,7 +520,8 @@ def run(a, plan, out: Path) -> int:
     result = {'plan': plan.source,
               'sim_mode': 'attached' if a.attach else a.sim_mode + (
                   f' at {a.rate:g}x' if a.sim_mode == 'paced' else ''),
-              'ramp_s': a.ramp_s, 'warmup': a.warmup, 'cycles_requested': a.cycles,
+              'ramp_s': a.ramp_s, 'friction_map': a.friction_map or 'nominal',
+              'warmup': a.warmup, 'cycles_requested': a.cycles,
               'wall_time_s': time.monotonic() - t_start, 'load': load,
               'summary': summary, 'plan_predictions': preds, 'cycles': cycles,
               'sags_rad': sags, 'failed': rc != 0,
