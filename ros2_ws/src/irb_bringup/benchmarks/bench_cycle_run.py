@@ -7,7 +7,7 @@ runs it --cycles times with `ros2 run irb_bringup cycle_run` (paced simulator, b
 the tool), and prints and writes the figures as JSON to results/cycle_run_<model>.json:
 measured vs planned energy per cycle (median, worst), the terms, stops, sag at release, load.
 
-    python ros2_ws/src/irb_bringup/benchmarks/bench_cycle_run.py --model plant --cycles 30
+    python ros2_ws/src/irb_bringup/benchmarks/bench_cycle_run.py --model plant --cycles 100
 """
 import argparse
 import json
@@ -27,6 +27,11 @@ def main():
     ap.add_argument('--work', default='/tmp/bench_cycle_run')
     ap.add_argument('--jobs', type=int, default=2)
     ap.add_argument('--sim-mode', default='paced')
+    ap.add_argument('--limit-scaling', type=float, default=0.6,
+                    help="the plans' share of the torque/speed limits (pdplus refused the "
+                    "gluing cycle's fast moves at 0.9: acceleration and tracking error)")
+    ap.add_argument('--cache', default='', help="front cache ('' = <work>/fronts)")
+    ap.add_argument('--friction-map', default='', help="pdplus's compensation map")
     a = ap.parse_args()
     from ament_index_python.packages import get_package_share_directory
     cycle = Path(get_package_share_directory('irb_planning')) / 'config' / 'cycle_gluing.yaml'
@@ -35,7 +40,8 @@ def main():
     work = Path(a.work)
     plan_dir, run_dir = work / f'plan_{a.model}', work / f'run_{a.model}'
     cmd = ['ros2', 'run', 'irb_planning', 'cycle', '--cycle', str(cycle), '--out',
-           str(plan_dir), '--cache', str(work / 'fronts'), '--jobs', str(a.jobs), '--no-plots']
+           str(plan_dir), '--cache', a.cache or str(work / 'fronts'), '--jobs', str(a.jobs),
+           '--limit-scaling', str(a.limit_scaling), '--no-plots']
     if a.model == 'plant':
         cmd += ['--electrical', str(plant)]
     t0 = time.monotonic()
@@ -44,12 +50,15 @@ def main():
     load0 = os.getloadavg()
     run = ['ros2', 'run', 'irb_bringup', 'cycle_run', '--plan', str(plan_dir), '--cycles',
            str(a.cycles), '--out', str(run_dir), '--sim-mode', a.sim_mode]
+    if a.friction_map:
+        run += ['--friction-map', a.friction_map]
     t0 = time.monotonic()
     rc = subprocess.run(run).returncode
     t_run = time.monotonic() - t0
     res = json.loads((run_dir / 'cycle_run.json').read_text())
     s = res['summary']
     out = {'benchmark': 'cycle_run', 'model': a.model, 'cycle_file': str(cycle),
+           'limit_scaling': a.limit_scaling,
            'commands': [' '.join(cmd), ' '.join(run)], 'exit_code': rc,
            'plan_wall_s': t_plan, 'run_wall_s': t_run, 'load_before': load0,
            'load_after': os.getloadavg(), 'sim_mode': res['sim_mode'],

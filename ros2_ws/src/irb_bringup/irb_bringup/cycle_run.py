@@ -52,9 +52,9 @@ def parse_args(argv):
                    'off in a deeper mode: the requests of a station then land later)')
     p.add_argument('--rate', type=float, default=1.0,
                    help='paced: simulated seconds per wall-clock second (default 1)')
-    p.add_argument('--ramp-s', type=float, default=0.1,
+    p.add_argument('--ramp-s', type=float, default=0.05,
                    help="[s] pdplus's shortest ramp from hold to a plan's start when brought "
-                   'up (the robot is at the start already; default 0.1, pdplus\'s own 0.5)')
+                   'up (the robot is at the start already; default 0.05, pdplus\'s own 0.5)')
     p.add_argument('--step-timeout', type=float, default=120.0,
                    help='[s] wall time a step may take before the run is abandoned')
     p.add_argument('--friction-map', default='',
