@@ -66,6 +66,9 @@ def parse_args(argv):
                    "irb_control's config/plant_electrical.yaml): the predictions' plant model")
     p.add_argument('--pdplus', default='pdplus', help="pdplus's node name (default pdplus)")
     p.add_argument('--no-plot', action='store_true', help='write no PNG')
+    p.add_argument('--save-series', action='store_true',
+                   help='also write series.npz: electrical_power total (t, w) and joint '
+                   'positions (t, q) as received, and pdplus\'s mode changes')
     p.add_argument('--verbose', action='store_true', help="echo the nodes' output")
     a = p.parse_args(argv)
     if a.cycles < 1 or a.ramp_s <= 0 or a.step_timeout <= 0 or a.rate <= 0:
@@ -480,12 +483,16 @@ def run(a, plan, out: Path) -> int:
                 pt, pw = np.array(runner.p_t), np.array(runner.p_w)
                 qt, qq = np.array(runner.q_t), np.array(runner.q)
                 stops_seen = [(t, r) for t, m, r in runner.modes if m == 4]
+                modes_seen = [(t, m) for t, m, _ in runner.modes]
             runner.close()
         if group is not None:
             group.stop()
     if runner is None:
         return 1
     stops += [r for _, r in stops_seen if r not in stops]
+    if a.save_series:
+        np.savez_compressed(out / 'series.npz', power_t=pt, power_w=pw, joints_t=qt,
+                            joints_q=qq, modes=np.array(modes_seen, float).reshape(-1, 2))
     cycles, sags = [], []
     if ex is not None:
         try:

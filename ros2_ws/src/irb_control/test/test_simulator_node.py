@@ -194,9 +194,15 @@ def test_a_lockstep_simulator_in_a_deeper_mode_serves_its_services():
     node = SimulatorNode(context=ctx, namespace=ns,
                          parameter_overrides=[Parameter('mode', value='lockstep')])
     client_node = rclpy.create_node('asker', context=ctx, namespace=ns)
-    ex = make_executor(node.p['executor'])
-    ex.add_node(node)
-    loop = threading.Thread(target=node.run, args=(ex,), daemon=True)
+
+    def spin():             # the executor made and run on one thread, as _spin does
+        ex = make_executor(node.p['executor'], context=ctx)
+        ex.add_node(node)
+        try:
+            node.run(ex)
+        except Exception:  # noqa: BLE001 - the shutdown at the end of the test
+            pass
+    loop = threading.Thread(target=spin, daemon=True)
     try:
         assert node.plant.request_power_mode('brakes', 0.0)[0]
         assert node.plant.motors_off_requested
