@@ -28,6 +28,7 @@ setup(
             'bringup = irb_bringup.bringup:main',
             'ctl = irb_bringup.ctl:main',
             'report = irb_bringup.report:main',
+            'cycle_run = irb_bringup.cycle_run:main',
         ],
     },
 )

@@ -377,6 +377,10 @@ class SimulatorNode(Node):
                 # nobody answers while the drives are switched off on purpose: no wait
                 deadline = time.monotonic() + (0.0 if self.plant.motors_off_requested
                                                else self.p['lockstep_wait_s'])
+                if self.plant.motors_off_requested:
+                    # no command is awaited, but requests are: without this a lockstep
+                    # simulator in a deeper power mode never served ~/power_hold (cycle_run)
+                    executor.spin_once(timeout_sec=0.0)
                 while self._answered_k != self._k and running(self.context):
                     left = deadline - time.monotonic()
                     if left <= 0:

@@ -176,3 +176,47 @@ def test_a_deeper_mode_ignores_commands_and_holds_the_arm_on_its_brakes(sim):
         pl.step()
     assert pl.rejected_mode == 250 and not pl.error and pl.braked
     np.testing.assert_array_equal(pl.state.q, q0)
+
+
+def test_a_lockstep_simulator_in_a_deeper_mode_serves_its_services():
+    """In lockstep, nobody answers while the drives are off on purpose, and the loop steps
+    without waiting; it must still serve its services: ~/power_hold was never answered
+    (irb_bringup cycle_run). Run loop in a thread, the request from another node, a bound."""
+    import threading
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    from irb_control.node_util import make_executor
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    ns = f'/t_lockstep_{os.getpid()}'          # private names: no other simulator answers
+    node = SimulatorNode(context=ctx, namespace=ns,
+                         parameter_overrides=[Parameter('mode', value='lockstep')])
+    client_node = rclpy.create_node('asker', context=ctx, namespace=ns)
+
+    def spin():             # the executor made and run on one thread, as _spin does
+        ex = make_executor(node.p['executor'], context=ctx)
+        ex.add_node(node)
+        try:
+            node.run(ex)
+        except Exception:  # noqa: BLE001 - the shutdown at the end of the test
+            pass
+    loop = threading.Thread(target=spin, daemon=True)
+    try:
+        assert node.plant.request_power_mode('brakes', 0.0)[0]
+        assert node.plant.motors_off_requested
+        loop.start()
+        cex = SingleThreadedExecutor(context=ctx)
+        cex.add_node(client_node)
+        cli = client_node.create_client(Trigger, f'{ns}/simulator/power_hold')
+        assert cli.wait_for_service(timeout_sec=20.0)
+        fut = cli.call_async(Trigger.Request())
+        cex.spin_until_future_complete(fut, timeout_sec=20.0)
+        assert fut.done() and fut.result().success, 'the lockstep loop never served it'
+        assert node.plant.mode_target == 'hold' or node.plant.power_mode == 'hold'
+    finally:
+        rclpy.try_shutdown(context=ctx)
+        loop.join(timeout=10.0)
+        client_node.destroy_node()
+        node.destroy_node()

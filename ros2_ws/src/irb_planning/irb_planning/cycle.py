@@ -86,6 +86,7 @@ class CycleSpec:
     friction_map: str = ''
     power_modes: str = ''
     source: str = ''
+    limit_scaling: float = 0.0     # fraction of the torque/speed limits the plans use (0 = 1)
 
     @property
     def motions(self) -> list:
@@ -126,7 +127,8 @@ def parse_cycle(data, source: str = 'cycle', base_dir: Path | None = None) -> Cy
     if not isinstance(data, dict):
         raise _err(source, 'the file must hold a mapping with `takt_s` and `operations`')
     known = {'takt_s', 'operations', 'time_step_s', 'front_points', 'front_span', 'grid_size',
-             'energy_model', 'friction_map', 'power_modes', 'description', 'duty'}
+             'energy_model', 'friction_map', 'power_modes', 'description', 'duty',
+             'limit_scaling'}
     extra = set(data) - known
     if extra:
         raise _err(source, f'unknown keys {sorted(extra)}; known: {sorted(known)}')
@@ -201,7 +203,11 @@ def parse_cycle(data, source: str = 'cycle', base_dir: Path | None = None) -> Cy
     if model and not model.startswith('electrical_'):
         raise _err(source, f'energy_model must be electrical_<bus> (none, shared, '
                    f'regenerative) or empty, got {model!r}')
+    scaling = _number(data, 'limit_scaling', source, 0.0, minimum=0)
+    if scaling > 1:
+        raise _err(source, f'`limit_scaling` must be in (0, 1] (0 = 1), got {scaling}')
     return CycleSpec(takt_s=takt, operations=tuple(ops), time_step_s=step,
+                     limit_scaling=scaling,
                      front_points=int(points), front_span=span, grid_size=int(grid),
                      energy_model=model, friction_map=str(data.get('friction_map', '') or ''),
                      power_modes=str(data.get('power_modes', '') or ''), source=source)
@@ -519,13 +525,14 @@ def stations_and_motions(spec: CycleSpec, holding: dict) -> list:
 
 # --- fronts from the planner ---------------------------------------------------------------
 def plan_request(op: Operation, duration: float, objective: str, energy_model: str,
-                 grid: int, friction_map: str):
+                 grid: int, friction_map: str, limit_scaling: float = 0.0):
     """The PlanRequest of a motion (any path type, its process constraints)."""
     from .request import PlanRequest
     s = op.path
     t = s.get('type', 'circle') or 'circle'
     kw = dict(objective=objective, duration=float(duration), energy_model=energy_model,
               grid_size=int(grid), friction_map=friction_map, path_type=t,
+              limit_scaling=float(limit_scaling),
               **{k: float(v) for k, v in op.process.items()})
     if t == 'circle':
         kw.update(center=np.asarray(s['center'], float), radius=float(s['radius']),
@@ -593,7 +600,9 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                        'grid': spec.grid_size or s.grid_size, 'map': spec.friction_map,
                        'model': energy_model, 'electrical': repr(planner.electrical),
                        'delta': s.min_theta_dot_rad_s, 'margin': s.constraint_margin,
-                       'rate': [s.play_rate_hz, s.evaluation_rate_hz]},
+                       'rate': [s.play_rate_hz, s.evaluation_rate_hz],
+                       # only when set: the caches of plans at the full limits stay valid
+                       **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
@@ -631,7 +640,7 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
         t0 = time.perf_counter()
         try:
             r = planner.plan(plan_request(op, duration, objective, energy_model, grid,
-                                          spec.friction_map))
+                                          spec.friction_map, spec.limit_scaling))
         except PlanError as exc:
             if exc.code in (ERROR_INFEASIBLE_DURATION, ERROR_SOLVER) and objective != 'time':
                 return None, f'code {exc.code}: {exc.message}', time.perf_counter() - t0

@@ -38,6 +38,14 @@ def parse_args(argv):
     p.add_argument('--jobs', type=int, default=1,
                    help='processes planning the motions\' fronts at once (each builds its '
                    'own planner; 2 on a 2-core machine)')
+    p.add_argument('--electrical', default='',
+                   help="electrical-model YAML the plans and the power modes use ('' = "
+                   "irb_description's config/electrical.yaml); e.g. the simulator's "
+                   'irb_control config/plant_electrical.yaml to plan for that plant')
+    p.add_argument('--limit-scaling', type=float, default=0.0,
+                   help="fraction of the torque and speed limits the motions' plans use "
+                   "(0 = the file's limit_scaling, else 1); 0.9 leaves pdplus the headroom "
+                   'it asks of a plan (its plan_torque_fraction)')
     p.add_argument('--no-plots', action='store_true', help='write no PNG')
     return p.parse_args(argv)
 
@@ -63,7 +71,7 @@ def table(plan) -> str:
     return '\n'.join(rows)
 
 
-def write_outputs(plan, out: Path, plots: bool) -> dict:
+def write_outputs(plan, out: Path, plots: bool, electrical: str = '') -> dict:
     """cycle_plan.json, the chosen motions' path and plan files, the PNGs; returns the
     JSON written."""
     import json
@@ -96,6 +104,8 @@ def write_outputs(plan, out: Path, plots: bool) -> dict:
                        f'{rec["duration_s"]:g} --energy-model {plan.energy_model}')
     summary['cycle_file'] = plan.spec.source
     summary['energy_model'] = plan.energy_model
+    summary['electrical_config'] = str(electrical)   # '' = irb_description's electrical.yaml
+    summary['limit_scaling'] = plan.spec.limit_scaling or 1.0
     summary['fronts'] = {n: {'durations_s': sorted(f.points),
                              'energies_j': [f.points[d]['energy_j'] for d in sorted(f.points)],
                              'time_optimal_s': f.fastest['duration_s'],
@@ -120,6 +130,13 @@ def main(args=None):
         spec = load_cycle(a.cycle)
         if a.takt < 0 or not a.check_rate > 0 or a.jobs < 1:
             raise CycleError('--takt must be >= 0, --check-rate > 0 and --jobs >= 1')
+        if not 0 <= a.limit_scaling <= 1:
+            raise CycleError('--limit-scaling must be in [0, 1] (0 = the file\'s)')
+        if a.limit_scaling:
+            from dataclasses import replace
+            spec = replace(spec, limit_scaling=a.limit_scaling)
+        if a.electrical and not Path(a.electrical).is_file():
+            raise CycleError(f'--electrical: no file {a.electrical}')
     except CycleError as exc:
         print(f'cycle: {exc}', file=sys.stderr)
         return 2
@@ -128,7 +145,8 @@ def main(args=None):
     try:
         planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
                                                    play_rate_hz=a.check_rate,
-                                                   evaluation_rate_hz=a.check_rate))
+                                                   evaluation_rate_hz=a.check_rate,
+                                                   electrical_config=a.electrical))
         plan = plan_cycle(spec, planner, cache_dir=Path(a.cache) if a.cache
                           else out / 'fronts', progress=lambda s: print(s, flush=True),
                           takt_s=a.takt or None, jobs=a.jobs)
@@ -142,7 +160,7 @@ def main(args=None):
         return 130
     print(table(plan))
     try:
-        summary = write_outputs(plan, out, not a.no_plots)
+        summary = write_outputs(plan, out, not a.no_plots, a.electrical)
     except OSError as exc:
         print(f'cycle: cannot write to {out}: {exc.strerror}', file=sys.stderr)
         return 2

@@ -162,6 +162,7 @@ GOOD = {'takt_s': 20.0, 'operations': [
     (lambda d: d['operations'].append({'fixed': 'f', 'duration_s': 1, 'speed': 2}),
      'takes'),
     (lambda d: d.update(energy_model='mechanical'), 'electrical_'),
+    (lambda d: d.update(limit_scaling=1.5), 'limit_scaling'),
 ])
 def test_cycle_yaml_errors_are_one_line(tmp_path, mutate, match):
     import copy
@@ -172,6 +173,26 @@ def test_cycle_yaml_errors_are_one_line(tmp_path, mutate, match):
     with pytest.raises(CycleError, match=match) as err:
         load_cycle(p)
     assert '\n' not in str(err.value)
+
+
+def test_limit_scaling_reaches_every_plan_request_and_the_cache_key():
+    from irb_planning.cycle import _cache_key, parse_cycle, plan_request
+    from types import SimpleNamespace
+    import copy
+    d = copy.deepcopy(GOOD)
+    full = parse_cycle(copy.deepcopy(d))
+    d['limit_scaling'] = 0.9
+    spec = parse_cycle(d)
+    assert spec.limit_scaling == 0.9 and full.limit_scaling == 0.0
+    op = spec.motions[0]
+    assert plan_request(op, 1.0, 'energy', 'electrical_shared', 30, '',
+                        spec.limit_scaling).limit_scaling == 0.9
+    planner = SimpleNamespace(settings=SimpleNamespace(
+        grid_size=30, min_theta_dot_rad_s=0.05, constraint_margin=0.005, play_rate_hz=1e3,
+        evaluation_rate_hz=1e3), electrical='e')
+    # plans at other limits are other plans; without the key the old caches stay valid
+    assert _cache_key(planner, op, spec, 'electrical_shared') != _cache_key(
+        planner, op, full, 'electrical_shared')
 
 
 def test_unreadable_cycle_files(tmp_path):
