@@ -727,7 +727,10 @@ class Planner:
                                     - self.model.inverse_dynamics(hi.q[k], z, z)
                                     for k in range(breaks.size)]))
         need = np.maximum(need, np.max(dtau / sm.torque_rate, axis=1))
-        spread = np.clip(BLEND_JERK_FACTOR * need, s.min_point_spacing_s, s.blend_time_max_s)
+        # 15 % more than the NLP's caps assume where there is room: the profile's own jerk
+        # and the blend's curvature add to the spread jump's between the twins
+        spread = np.clip(1.15 * BLEND_JERK_FACTOR * need, s.min_point_spacing_s,
+                         s.blend_time_max_s)
         tb = profile.theta_at(breaks)[0]
         edges = np.concatenate([[0.0], tb, [profile.duration]])
         room = 0.9 * np.minimum(np.diff(edges)[:-1], np.diff(edges)[1:])
