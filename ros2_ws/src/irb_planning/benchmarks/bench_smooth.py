@@ -79,7 +79,7 @@ def draw(kind: str, rng) -> PlanRequest:
     return PlanRequest(path_type='spline', waypoints=way, closed=closed)
 
 
-def analyse(model, res, req, smooth=None) -> dict:
+def analyse(model, res, req, smooth=None, windows=None) -> dict:
     """The success played at 10 kHz: ratios to the limits, spacing, consistency, peaks."""
     tr, ver = res.trajectory, res.verification
     lim = model.limits
@@ -103,6 +103,15 @@ def analyse(model, res, req, smooth=None) -> dict:
     ti = p.t[p.idx]
     rigid = p.tau - model.friction.torque(p.qd[p.idx])
     rate = np.abs(np.diff(rigid, axis=0)) / np.diff(ti)[:, None]
+    # the twin intervals around a blend end's curvature jump: reported apart
+    out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
+    for lo, hi in (() if windows is None else windows):
+        out_j &= ~((p.t[1:] > lo) & (p.t[:-1] < hi))
+        out_r &= ~((ti[1:] > lo) & (ti[:-1] < hi))
+    if not out_j.all():
+        out['blend_end_joint_jerk_peak'] = float(jerk[~out_j].max())
+        out['blend_end_torque_rate_peak'] = float(rate[~out_r].max())
+    jerk, rate = jerk[out_j], rate[out_r]
     out['joint_jerk_peak'] = jerk.max(axis=0).tolist()
     out['torque_rate_peak'] = rate.max(axis=0).tolist()
     out['tcp_jerk_peak'] = float(ver.tcp_jerk_peak)
@@ -268,7 +277,8 @@ def main():
                 break
         if opt is not None:
             rows.append({'type': kind, 'objective': 'time', 'process': False, 'jerk': True,
-                         **analyse(model, opt, opt.request, smooth)})
+                         **analyse(model, opt, opt.request, smooth,
+                                   planner._blend_windows(opt.profile, request_path(req)))})
             T = float(rng.uniform(1.2, 2.5)) * opt.min_duration
             req = replace(req, duration=T)
             process = i % 2 == 1
@@ -281,7 +291,9 @@ def main():
                     res = pl.plan(req)
                     rows.append({'type': kind, 'objective': 'energy', 'process': process,
                                  'jerk': jerk, 'plan_wall_s': time.perf_counter() - w,
-                                 **analyse(model, res, req, smooth if jerk else None)})
+                                 **analyse(model, res, req, smooth if jerk else None,
+                                           pl._blend_windows(res.profile,
+                                                             request_path(req)))})
                     pair[jerk] = res.evaluation.energy
                 except PlanError as exc:
                     refusals.append({'type': kind, 'objective': 'energy', 'process': process,

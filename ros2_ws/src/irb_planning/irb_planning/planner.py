@@ -44,7 +44,7 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       ERROR_SOLVER, ERROR_UNREACHABLE, ENERGY_MECHANICAL, ENERGY_MODELS,
                       OBJECTIVE_ENERGY, OBJECTIVE_TIME,
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
-from .transcription import (BLEND_JERK_FACTOR, BOUNDARY_PERIODIC, BOUNDARY_REST,
+from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST,
                             RAMP_SPEED_EXPONENT, TIME_OBJECTIVE_ENERGY_WEIGHT, JerkPath,
                             SolveRequest, TcpPath, Transcription)
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
@@ -93,7 +93,6 @@ class PlannerSettings:
     tcp_jerk_limit_m_s3: float = 100.0
     # rigid-body torque rate; default: each joint's torque limit in 50 ms
     torque_rate_limit_nm_s: tuple = (14000.0, 18000.0, 9000.0)
-    blend_time_max_s: float = 0.05       # longest spread of a blend end's acceleration jump
 
 
 @dataclass
@@ -312,8 +311,7 @@ class Planner:
                            req.tcp_ramp_length,
                            jerk_limit=None if sm is None else sm.jerk * keep,
                            tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep,
-                           torque_rate_limit=None if sm is None else sm.torque_rate * keep,
-                           blend_time_max=self.settings.blend_time_max_s)
+                           )
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
     @property
@@ -671,8 +669,7 @@ class Planner:
             theta = np.append((nodes[:-1, None] + np.diff(nodes)[:, None] * frac).ravel(),
                               nodes[-1])
             t, theta, td, tdd, jp = message_points(profile, theta, path.breaks,
-                                                   s.min_point_spacing_s, sample,
-                                                   self._blend_spreads(profile, path))
+                                                   s.min_point_spacing_s, sample)
             qd = jp.dq * td[:, None]
             qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
@@ -680,7 +677,8 @@ class Planner:
                               path_tolerance_m=s.path_tolerance_m,
                               electrical=self.electrical,
                               band=request_band(req, self.ramp_exponent),
-                              stamp_resolution_s=STAMP_RESOLUTION_S, smooth=self.smooth_limits)
+                              stamp_resolution_s=STAMP_RESOLUTION_S, smooth=self.smooth_limits,
+                              smooth_exempt=self._blend_windows(profile, path))
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
@@ -699,42 +697,17 @@ class Planner:
         tau = torque(jp.q, qd, qdd)
         return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}, ver
 
-    def _blend_spreads(self, profile: ThetaProfile, path: PathBase) -> np.ndarray | None:
-        """Time [s] over which the message spreads each interior piece end's acceleration
-        jump (the twins' spacing): the quintic's jerk 2.25 x jump / spread within every
-        smoothness limit, at least min_point_spacing_s, at most blend_time_max_s and 0.9 x
-        the time to the neighbouring piece ends. None: no piece ends or limits."""
-        sm, s = self.smooth_limits, self.settings
-        breaks = np.asarray(path.breaks, float)
-        if sm is None or breaks.size == 0:
+    def _blend_windows(self, profile: ThetaProfile, path: PathBase) -> np.ndarray | None:
+        """(B, 2) [s]: the message intervals between the twin points around each interior
+        piece end (where a circular blend's curvature jumps), which the smoothness check
+        reports apart (None: no piece ends)."""
+        inner = np.asarray(path.breaks, float)
+        inner = inner[(inner > 0) & (inner < 2 * np.pi)]
+        if inner.size == 0:
             return None
-        eps = 1e-7
-        with self._model_lock:
-            lo = joint_path(self.model, path, breaks - eps)
-            hi = joint_path(self.model, path, breaks + eps)
-        b = profile.theta_at(breaks)[1] ** 2
-        dq2 = np.abs(hi.ddq - lo.ddq) * b[:, None]
-        need = np.max(dq2 / sm.jerk, axis=1)
-        if sm.tcp_jerk > 0:
-            dp2 = np.linalg.norm(path.dd_point(breaks + eps) - path.dd_point(breaks - eps),
-                                 axis=1) * b
-            need = np.maximum(need, dp2 / sm.tcp_jerk)
-        # torque: the jump of M Phi'' b (the other terms are continuous: Phi' is)
-        z = np.zeros(hi.dq.shape[1])
-        dacc = (hi.ddq - lo.ddq) * b[:, None]
-        with self._model_lock:
-            dtau = np.abs(np.array([self.model.inverse_dynamics(hi.q[k], z, dacc[k])
-                                    - self.model.inverse_dynamics(hi.q[k], z, z)
-                                    for k in range(breaks.size)]))
-        need = np.maximum(need, np.max(dtau / sm.torque_rate, axis=1))
-        # 15 % more than the NLP's caps assume where there is room: the profile's own jerk
-        # and the blend's curvature add to the spread jump's between the twins
-        spread = np.clip(1.15 * BLEND_JERK_FACTOR * need, s.min_point_spacing_s,
-                         s.blend_time_max_s)
-        tb = profile.theta_at(breaks)[0]
-        edges = np.concatenate([[0.0], tb, [profile.duration]])
-        room = 0.9 * np.minimum(np.diff(edges)[:-1], np.diff(edges)[1:])
-        return np.maximum(np.minimum(spread, room), s.min_point_spacing_s)
+        t_b = profile.theta_at(inner)[0]
+        half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
+        return np.column_stack([t_b - half, t_b + half])
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the
@@ -899,7 +872,7 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
 
 
 def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
-                   min_spacing: float, sample, spreads: np.ndarray | None = None) -> tuple:
+                   min_spacing: float, sample) -> tuple:
     """The trajectory message's points from candidate path parameters ``theta`` (increasing,
     0 .. 2 pi): (t [s] as the message stamps them, theta, theta_dot, theta_ddot, the
     JointPath ``sample(theta)`` at them).
@@ -908,8 +881,6 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
       by two points half ``min_spacing`` (+0.1 %) of time before and after it: each interval
       but the one between them lies in one piece, so the accelerations declared at its ends
       are its own, and the jump is played as the quintic between the twins spreads it;
-      ``spreads`` (one per interior piece end, [s]): the twins that far apart instead (the
-      smoothness limits' spread), every other candidate between them left out;
     * no two points closer than ``min_spacing`` [s] (``trajectory_rules.spaced``, points
       where a joint acceleration peaks or dips kept first, then nodes): a controller's
       quintic between points microseconds apart turns the stamps' nanosecond resolution
@@ -922,16 +893,9 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
     on[[0, -1]] = False
     if np.any(on):
         t_b = profile.theta_at(theta[on])[0]
-        half = np.full(t_b.size, 0.5 * min_spacing * (1 + 1e-3))
-        if spreads is not None:
-            inner = breaks[(breaks > 0) & (breaks < 2 * np.pi)]
-            half = np.maximum(half, 0.5 * np.asarray(spreads, float)[
-                np.searchsorted(inner, theta[on])] * (1 + 1e-3))
-        lo_t, hi_t = profile.sample(t_b - half)[0], profile.sample(t_b + half)[0]
-        rest = theta[~on]
-        inside = np.any((rest[:, None] > lo_t[None, :]) & (rest[:, None] < hi_t[None, :]),
-                        axis=1)
-        theta = np.unique(np.concatenate([rest[~inside], lo_t, hi_t]))
+        half = 0.5 * min_spacing * (1 + 1e-3)
+        twins = np.concatenate([profile.sample(t_b - half)[0], profile.sample(t_b + half)[0]])
+        theta = np.unique(np.concatenate([theta[~on], twins]))
     t, td, tdd = profile.theta_at(theta)
     jp = sample(theta)
     qdd = jp.ddq * td[:, None] ** 2 + jp.dq * tdd[:, None]
@@ -971,15 +935,7 @@ def jerk_path(path: PathBase, sample, theta: np.ndarray, nodes, sides) -> JerkPa
                          (3 * f0 - 16 * f1 + 36 * f2 - 48 * f3 + 25 * f4) / (12 * d)])
 
     pick = lambda f: np.stack([f[:, 0], f[:, 2], f[:, 4]])  # noqa: E731
-    idx = np.zeros(0, int)
-    c_jump = np.zeros((0, n))
-    if sides is not None and len(sides[0]):
-        idx = np.asarray(sides[0], int)
-        keep = (idx > 0) & (idx < theta.size - 1)
-        idx = idx[keep]
-        c_jump = np.abs(sides[1].c[keep] - nodes.c[idx])
-    return JerkPath(pick(dq), pick(ddq), third(ddq), pick(d1), pick(d2), third(d2), idx,
-                    c_jump)
+    return JerkPath(pick(dq), pick(ddq), third(ddq), pick(d1), pick(d2), third(d2))
 
 
 def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:

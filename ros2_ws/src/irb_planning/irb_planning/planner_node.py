@@ -89,8 +89,6 @@ PARAMETERS = {
     'tcp_jerk_limit_m_s3': ('tcp_jerk_limit_m_s3', '|TCP jerk| limit [m/s^3]'),
     'torque_rate_limit_nm_s': ('torque_rate_limit_nm_s', 'rate of the rigid-body torque '
                                'per joint [N m/s]'),
-    'blend_time_max_s': ('blend_time_max_s', "longest time over which the trajectory "
-                         "message spreads a blend end's acceleration jump [s]"),
 }
 #: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
 MAP_DIRS = 'friction_map_dirs'

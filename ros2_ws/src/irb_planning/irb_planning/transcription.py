@@ -74,12 +74,10 @@ the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3|
 J_tcp^2 at both ends and the midpoint of every interval (each node from both sides). A
 rest-to-rest problem then has a = 0 at its rest nodes and cubic rest intervals (profile.py:
 constant path jerk from rest, theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the
-torque starts and ends at the static torque. Where the path's curvature jumps (a blend's end)
-the joint and TCP accelerations and the torque jump by (Phi''+ - Phi''-) b, (p''+ - p''-) b
-and (c+ - c-) b; the message spreads each such jump over two points up to
-``SolveRequest.blend_time_max`` apart, where the quintic's jerk peaks at 2.25 jump / spread:
-b at those nodes is capped so that the spread fits with every jerk and the torque rate
-within its limit.
+torque starts and ends at the static torque. Where the path's curvature jumps (a circular
+blend's end) the joint and TCP accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b:
+no motion exactly on the path has a finite jerk there at b > 0, so the rows hold on each side
+and the jump itself is the message's (two points 1 ms apart, planner.message_points).
 """
 from __future__ import annotations
 
@@ -123,8 +121,6 @@ class SolveRequest:
     tcp_ramp_length: float = 0.0   # [m] of arc length at each rest end free of tcp_speed_min
     jerk_limit: np.ndarray | None = None   # (n,) [rad/s^3]; None = none (needs ``jerk`` rows)
     tcp_jerk_max: float = 0.0      # [m/s^3], 0 = none
-    torque_rate_limit: np.ndarray | None = None   # (n,) [N m/s]: the blend caps only
-    blend_time_max: float = 0.05   # [s] longest spread of a blend end's acceleration jump
 
     @property
     def process_key(self) -> tuple:
@@ -147,9 +143,6 @@ class TcpPath:
     sigma: np.ndarray
 
 
-#: the quintic between two points around an acceleration step da spread over T peaks at a jerk
-#: of 2.25 da / T (and deviates from the path by 0.0027 da T^2); with 2 % room
-BLEND_JERK_FACTOR = 2.25 * 1.02
 #: the tcp_speed_min floor over a rest ramp, v >= v_min (d / r)^RAMP_SPEED_EXPONENT: 2/3 is
 #: the speed of a constant-jerk start (v ~ t^2, d ~ t^3), which the jerk limits allow
 RAMP_SPEED_EXPONENT = 2.0 / 3.0
@@ -160,8 +153,7 @@ class JerkPath:
     """The path's derivatives for the jerk rows, at three points of every interval (0: just
     after its start node, 1: midpoint, 2: just before its end node; each on the interval's own
     side of a piece end): dq, ddq, dddq (3, K, n) [rad/rad^k], tcp d1, d2, d3 (3, K, 3)
-    [m/rad^k]; the jump of c (torque per b) at the piece-end nodes ``break_idx`` (B,) as
-    c_jump (B, n) [N m s^2/rad^2]."""
+    [m/rad^k]."""
 
     dq: np.ndarray
     ddq: np.ndarray
@@ -169,27 +161,6 @@ class JerkPath:
     d1: np.ndarray
     d2: np.ndarray
     d3: np.ndarray
-    break_idx: np.ndarray
-    c_jump: np.ndarray
-
-    def blend_caps(self, req: 'SolveRequest', n_nodes: int) -> np.ndarray:
-        """Cap on b (N,) at the piece-end nodes from the blend spread (inf elsewhere)."""
-        cap = np.full(n_nodes, np.inf)
-        if self.break_idx.size == 0 or req.jerk_limit is None:
-            return cap
-        k = self.break_idx
-        T = req.blend_time_max / BLEND_JERK_FACTOR
-        with np.errstate(divide='ignore'):
-            dq2 = np.abs(self.ddq[0, k] - self.ddq[2, k - 1])           # (B, n)
-            c = np.min(req.jerk_limit * T / dq2, axis=1)
-            if req.tcp_jerk_max > 0:
-                dp2 = np.linalg.norm(self.d2[0, k] - self.d2[2, k - 1], axis=1)
-                c = np.minimum(c, req.tcp_jerk_max * T / dp2)
-            if req.torque_rate_limit is not None:
-                c = np.minimum(c, np.min(req.torque_rate_limit * T / np.abs(self.c_jump),
-                                         axis=1))
-        cap[k] = c
-        return cap
 
 
 def _frame_components(d1, d2, d3):
@@ -464,8 +435,6 @@ class Transcription:
         if self.boundary == BOUNDARY_REST and not self.cubic_rest:   # leave / reach rest at
             lba[0] = max(lba[0], a_rest[0])         # least as fast as the ramp floor rises
             uba[-1] = min(uba[-1], -a_rest[1])
-        if self.jerk is not None:                   # blend ends: the jump fits its spread
-            cap_n = np.minimum(cap_n, self.jerk.blend_caps(req, N))
         beta_m = np.minimum(beta_m, cap_m)
         if self.boundary == BOUNDARY_REST:
             lbb = np.maximum(lbb, floor_n[1:-1])

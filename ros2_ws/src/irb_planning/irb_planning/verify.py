@@ -313,6 +313,7 @@ class Verification:
     tcp_jerk_peak: float = float('nan')     # [m/s^3] as played
     peak_torque_rate: np.ndarray | None = None   # (n,) [N m/s] rigid-body torque, as played
     tau_rigid: np.ndarray = field(repr=False, default=None)   # played, without friction
+    blend_end_peaks: dict = field(default_factory=dict)   # the same inside exempt windows
 
     @property
     def ok(self) -> bool:
@@ -417,7 +418,8 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
                 path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6,
                 electrical=None, band: TcpBand | None = None,
                 stamp_resolution_s: float = 0.0,
-                smooth: SmoothLimits | None = None) -> Verification:
+                smooth: SmoothLimits | None = None,
+                smooth_exempt: np.ndarray | None = None) -> Verification:
     """Check a plan's trajectory message as played (see module docstring).
 
     t (K,) [s]; q, qd, qdd (K, n); profile = (theta, theta_dot, theta_ddot, quadratic): node
@@ -505,33 +507,49 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
     elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
     tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems)
            if band is not None and band.active else (np.nan,) * 4)
-    peak_j = np.abs(jerk).max(axis=0)
+    # smoothness: samples (jerk) and sample pairs (rates) inside an exempt window (the twin
+    # points around a blend end's curvature jump) are reported apart
     dts = np.diff(ts)[:, None]
-    peak_rate = (np.abs(np.diff(tau_r, axis=0)) / dts).max(axis=0)
+    rate = np.abs(np.diff(tau_r, axis=0)) / dts
     _, acc = kin.tcp_rates(qs, qds, qdds)
-    tcp_j = float((np.linalg.norm(np.diff(acc, axis=0), axis=1) / dts[:, 0]).max())
+    tj = np.linalg.norm(np.diff(acc, axis=0), axis=1) / dts[:, 0]
+    out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
+    for lo, hi in (() if smooth_exempt is None else np.asarray(smooth_exempt, float)):
+        out_j &= ~((ts[:-1] >= lo) & (ts[:-1] < hi))
+        out_r &= ~((ts[1:] > lo) & (ts[:-1] < hi))
+    zero = np.zeros(n)
+    peak_j = np.abs(jerk[out_j]).max(axis=0) if out_j.any() else zero
+    peak_rate = rate[out_r].max(axis=0) if out_r.any() else zero
+    tcp_j = float(tj[out_r].max()) if out_r.any() else 0.0
+    blend = {}
+    if not out_j.all():
+        blend = {'joint_jerk': np.abs(jerk[~out_j]).max(axis=0),
+                 'torque_rate': rate[~out_r].max(axis=0), 'tcp_jerk': float(tj[~out_r].max())}
     if smooth is not None:
-        check_smooth(smooth, ts, jerk, peak_j, tau_r, peak_rate, acc, tcp_j, problems)
+        check_smooth(smooth, ts, np.where(out_j[:, None], jerk, 0.0),
+                     np.where(out_r[:, None], rate, 0.0), np.where(out_r, tj, 0.0), problems)
     return Verification(problems, float(dev.max()), float(worst_time), energy,
                         float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec,
-                        *tcp, peak_j, tcp_j, peak_rate, tau_r)
+                        *tcp, peak_j, tcp_j, peak_rate, tau_r, blend)
 
 
-def check_smooth(lim: SmoothLimits, ts, jerk, peak_j, tau_r, peak_rate, acc, tcp_j,
-                 problems: list) -> None:
-    """The smoothness limits on the played samples; a line per broken one in ``problems``."""
-    for i in range(peak_j.size):
-        if peak_j[i] > lim.jerk[i] * (1 + LIMIT_RTOL):
-            k = int(np.argmax(np.abs(jerk[:, i])))
-            problems.append(f'joint {i + 1} jerk {peak_j[i]:.1f} rad/s^3 > {lim.jerk[i]:g} '
-                            f'at t = {ts[k]:.4f} s')
-        if peak_rate[i] > lim.torque_rate[i] * (1 + LIMIT_RTOL):
-            k = int(np.argmax(np.abs(np.diff(tau_r[:, i])) / np.diff(ts)))
-            problems.append(f'joint {i + 1} torque rate {peak_rate[i]:.0f} N m/s > '
+def check_smooth(lim: SmoothLimits, ts, jerk, rate, tcp_jerk, problems: list) -> None:
+    """The smoothness limits on the played samples (jerk (M, n) at the samples, rate (M-1, n)
+    and tcp_jerk (M-1,) between them; 0 where exempt); a line per broken one in
+    ``problems``."""
+    for i in range(jerk.shape[1]):
+        k = int(np.argmax(np.abs(jerk[:, i])))
+        if abs(jerk[k, i]) > lim.jerk[i] * (1 + LIMIT_RTOL):
+            problems.append(f'joint {i + 1} jerk {abs(jerk[k, i]):.1f} rad/s^3 > '
+                            f'{lim.jerk[i]:g} at t = {ts[k]:.4f} s')
+        k = int(np.argmax(rate[:, i]))
+        if rate[k, i] > lim.torque_rate[i] * (1 + LIMIT_RTOL):
+            problems.append(f'joint {i + 1} torque rate {rate[k, i]:.0f} N m/s > '
                             f'{lim.torque_rate[i]:g} at t = {ts[k]:.4f} s')
-    if lim.tcp_jerk > 0 and tcp_j > lim.tcp_jerk * (1 + LIMIT_RTOL):
-        k = int(np.argmax(np.linalg.norm(np.diff(acc, axis=0), axis=1) / np.diff(ts)))
-        problems.append(f'tcp jerk {tcp_j:.1f} m/s^3 > {lim.tcp_jerk:g} at t = {ts[k]:.4f} s')
+    k = int(np.argmax(tcp_jerk))
+    if lim.tcp_jerk > 0 and tcp_jerk[k] > lim.tcp_jerk * (1 + LIMIT_RTOL):
+        problems.append(f'tcp jerk {tcp_jerk[k]:.1f} m/s^3 > {lim.tcp_jerk:g} at '
+                        f't = {ts[k]:.4f} s')
 
 
 #: [m] distance from a rest end within which a played sample counts as at rest (the

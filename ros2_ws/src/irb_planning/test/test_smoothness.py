@@ -35,7 +35,6 @@ def test_default_on_and_documented():
     assert list(params['joint_jerk_limit_rad_s3']) == list(s.joint_jerk_limit_rad_s3)
     assert params['tcp_jerk_limit_m_s3'] == s.tcp_jerk_limit_m_s3
     assert list(params['torque_rate_limit_nm_s']) == list(s.torque_rate_limit_nm_s)
-    assert params['blend_time_max_s'] == s.blend_time_max_s
 
 
 def test_cubic_rest_interval_is_exact():
