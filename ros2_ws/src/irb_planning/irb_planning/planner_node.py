@@ -86,7 +86,7 @@ PARAMETERS = {
                     'torque [-]'),
     'joint_jerk_limit_rad_s3': ('joint_jerk_limit_rad_s3', 'joint jerk limit per joint '
                                 '[rad/s^3]'),
-    'tcp_jerk_limit_m_s3': ('tcp_jerk_limit_m_s3', '|TCP jerk| limit [m/s^3]'),
+    'tcp_jerk_limit_m_s3': ('tcp_jerk_limit_m_s3', 'limit of the TCP jerk magnitude [m/s^3]'),
     'torque_rate_limit_nm_s': ('torque_rate_limit_nm_s', 'rate of the rigid-body torque '
                                'per joint [N m/s]'),
 }
