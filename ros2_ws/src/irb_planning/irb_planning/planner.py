@@ -310,8 +310,7 @@ class Planner:
                            req.tcp_speed_min * (2.0 - keep), req.tcp_accel_max * keep,
                            req.tcp_ramp_length,
                            jerk_limit=None if sm is None else sm.jerk * keep,
-                           tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep,
-                           )
+                           tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep)
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
 
     @property

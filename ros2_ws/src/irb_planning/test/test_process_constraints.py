@@ -136,8 +136,7 @@ def test_without_constraints_the_problem_and_its_solution_are_the_same(planner):
     assert base.process_key == (0.0, 0.0, 0.0, 0.0)
     sreq = SolveRequest(T, 0.0, 1.0, base.min_theta_dot, base.velocity_limit,
                         base.torque_limit, jerk_limit=base.jerk_limit,
-                        tcp_jerk_max=base.tcp_jerk_max,
-                        torque_rate_limit=base.torque_rate_limit)
+                        tcp_jerk_max=base.tcp_jerk_max)
     for a, b in zip(plain._bounds(sreq), with_tcp._bounds(sreq)):
         assert_array_equal(a, b)
     ra, rb = plain.solve(sreq), with_tcp.solve(sreq)
