@@ -676,7 +676,10 @@ class Planner:
                               path_tolerance_m=s.path_tolerance_m,
                               electrical=self.electrical,
                               band=request_band(req, self.ramp_exponent),
-                              stamp_resolution_s=STAMP_RESOLUTION_S, smooth=self.smooth_limits,
+                              stamp_resolution_s=STAMP_RESOLUTION_S,
+                              # the trapezoid and Fourier baselines (b linear between nodes:
+                              # theta_ddot steps at every node) are played unlimited
+                              smooth=self.smooth_limits if profile.quadratic else None,
                               smooth_exempt=self._blend_windows(profile, path))
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
