@@ -188,12 +188,13 @@ class ArmKinematics:
             T = T @ A
         return T[:, :3, 3]
 
-    def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                  positions: bool = False) -> tuple[np.ndarray, ...]:
         """TCP velocity and acceleration (M, 3) [m/s, m/s^2] of joint motions (M, 3): the DH
         product differentiated in time, T' = sum of the products with one A_i replaced by
         dA_i/dt (A_i' qd_i), T'' likewise with A_i'' qd_i^2 + A_i' qdd_i and 2 A_i' A_j'
-        terms, carried along the product as (T, T', T'')."""
+        terms, carried along the product as (T, T', T''). ``positions``: (p, v, a), p the
+        TCP of the same product (= ``tcp``)."""
         M = q.shape[0]
         q6, v6, a6 = (np.zeros((M, 6)) for _ in range(3))
         q6[:, :q.shape[1]], v6[:, :q.shape[1]], a6[:, :q.shape[1]] = q, qd, qdd
@@ -218,6 +219,8 @@ class ArmKinematics:
             Ad = dA * w                                   # dA/dt
             Add = ddA * w ** 2 + dA * wd                  # d2A/dt2
             T, T1, T2 = T @ A, T1 @ A + T @ Ad, T2 @ A + 2 * T1 @ Ad + T @ Add
+        if positions:
+            return T[:, :3, 3], T1[:, :3, 3], T2[:, :3, 3]
         return T1[:, :3, 3], T2[:, :3, 3]
 
 
@@ -478,7 +481,10 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
                                       min_samples_per_segment, jerk=True)
     ts, qs, qds, qdds = (np.concatenate([x, y[-1:]]) for x, y in
                          ((ts, t), (qs, q), (qds, qd), (qdds, qdd)))
-    dev = circle.deviation(kin.tcp(qs))
+    # TCP position, velocity, acceleration of every sample from one DH product pass (the
+    # deviation, the band and the TCP jerk share it: 2 passes cost half the check's time)
+    rates = kin.tcp_rates(qs, qds, qdds, positions=True)
+    dev = circle.deviation(rates[0])
     k = int(np.argmax(dev))
     if dev[k] > path_tolerance_m:
         problems.append(f'played by quintic interpolation the TCP leaves the path by '
@@ -505,13 +511,13 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
         problems.append('non-finite torque')
     energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
     elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
-    tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems)
+    tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems, rates)
            if band is not None and band.active else (np.nan,) * 4)
     # smoothness: samples (jerk) and sample pairs (rates) inside an exempt window (the twin
     # points around a blend end's curvature jump) are reported apart
     dts = np.diff(ts)[:, None]
     rate = np.abs(np.diff(tau_r, axis=0)) / dts
-    _, acc = kin.tcp_rates(qs, qds, qdds)
+    acc = rates[2]
     tj = np.linalg.norm(np.diff(acc, axis=0), axis=1) / dts[:, 0]
     out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
     for lo, hi in (() if smooth_exempt is None else np.asarray(smooth_exempt, float)):
@@ -558,14 +564,15 @@ REST_SLACK_M = 1e-6
 
 
 def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, rest: bool,
-               problems: list) -> tuple[float, float, float, float]:
+               problems: list, rates: tuple | None = None) -> tuple[float, float, float, float]:
     """The process constraints on the played samples; appends a line per broken one to
     ``problems`` (worded without ' speed ' / ' torque ': they are not the joint limits whose
     breach makes the planner add message points). Returns (peak TCP speed, lowest TCP speed
-    away from the rest ends, peak |TCP acceleration|, lowest speed / floor)."""
-    vel, acc = kin.tcp_rates(qs, qds, qdds)
+    away from the rest ends, peak |TCP acceleration|, lowest speed / floor). ``rates``: the
+    samples' (p, v, a) of ``kin.tcp_rates(..., positions=True)`` if already computed."""
+    pos, vel, acc = rates if rates is not None else kin.tcp_rates(qs, qds, qdds, True)
     speed, amag = np.linalg.norm(vel, axis=1), np.linalg.norm(acc, axis=1)
-    theta = np.clip(circle.theta(kin.tcp(qs)), 0.0, 2 * np.pi)
+    theta = np.clip(circle.theta(pos), 0.0, 2 * np.pi)
     sigma = circle.arc_length(theta)
     length = float(circle.arc_length(np.array([2 * np.pi]))[0])
     # the floor: v_min beyond the ramps; over them v_min sqrt(d / ramp), d the distance to
