@@ -23,10 +23,13 @@ Smoothness limits (issue 28): every energy request is planned twice, by the defa
 limit the worst played / limit ratio (joint jerk and rigid-body torque rate from the
 independent player's samples, TCP jerk from the planner's own played check). Path types in
 turn: circle, line, arc, polyline, spline, and a closed spline planned periodic. The JSON is
-rewritten every 5 requests (``partial``: true until the run ends).
+rewritten after every draw (``partial``: true until the run ends) with the random state;
+``--resume`` continues it (the planners' caches start empty again, so a resumed run's warm
+starts differ from an uninterrupted one's; the draws are the same).
 """
 import argparse
 import importlib.util
+import json
 import os
 import sys
 import time
@@ -34,7 +37,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from _common import dump
+from _common import RESULTS, dump
 
 from irb_description.trajectory_rules import worst_inconsistency
 from irb_planning.planner import Planner, PlannerSettings, request_path
@@ -200,6 +203,9 @@ def main():
     ap.add_argument('--seed', type=int, default=28)
     ap.add_argument('--periodic', type=int, default=2, help='closed splines, rest/periodic')
     ap.add_argument('--name', default='smooth_jerk')
+    ap.add_argument('--resume', action='store_true',
+                    help='continue results/<name>.json (same seed and grid) after its last '
+                         'draw: its rows, refusals and random state are read back')
     a = ap.parse_args()
     planner = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2))
     plain = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2,
@@ -210,6 +216,20 @@ def main():
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     rows, refusals, unreachable, costs = [], [], 0, []
+    start, periodic, runs = 0, None, []
+    if a.resume:
+        old_path = RESULTS / f'{a.name}.json'
+        if not old_path.is_file():
+            sys.exit(f'--resume: no {old_path}')
+        old = json.loads(old_path.read_text())
+        if old.get('seed') != a.seed or old.get('grid') != a.grid or 'rng_state' not in old:
+            sys.exit(f'--resume: {old_path} has another seed or grid, or no random state')
+        rows, refusals, costs = old['rows'], old['refusals'], old['energy_pairs']
+        unreachable, start, periodic = (old['unreachable_redraws'], old['done'],
+                                        old['periodic_closed_spline_vs_rest'])
+        runs = old.get('runs', [])
+        rng.bit_generator.state = old['rng_state']
+        print(f'resuming {old_path} after draw {start}', file=sys.stderr)
 
     def worst(key, sel=lambda r: True):
         vals = [r[key] for r in rows if key in r and sel(r)]
@@ -257,10 +277,15 @@ def main():
             'unreachable_redraws': unreachable, 'summary': summary,
             'periodic_closed_spline_vs_rest': periodic, 'energy_pairs': costs,
             'wall_s': time.perf_counter() - t0, 'load_start': load0,
-            'load_end': os.getloadavg(), 'rows': rows})
+            'load_end': os.getloadavg(), 'rng_state': rng.bit_generator.state,
+            'runs': runs + [{'from_draw': start, 'to_draw': done,
+                             'wall_s': time.perf_counter() - t0, 'load_start': load0,
+                             'load_end': os.getloadavg()}],
+            'rows': rows})
 
-    periodic = periodic_vs_rest(planner, rng, a.periodic)   # first: in every partial JSON
-    for i in range(a.count):
+    if not a.resume:          # first: in every partial JSON
+        periodic = periodic_vs_rest(planner, rng, a.periodic)
+    for i in range(start, a.count):
         kind = TYPES[i % len(TYPES)]
         while True:
             req = draw(kind, rng)
@@ -305,8 +330,7 @@ def main():
                               'cost': pair[True] / pair[False] - 1.0})
         print(f'{i + 1}/{a.count} {kind} done ({len(rows)} plans, {len(refusals)} refused)',
               file=sys.stderr)
-        if (i + 1) % 5 == 0:
-            write(i + 1, True, periodic)
+        write(i + 1, True, periodic)            # after every draw: --resume loses none
     write(a.count, False, periodic)
 
 
