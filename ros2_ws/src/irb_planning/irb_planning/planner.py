@@ -781,12 +781,16 @@ def _band_error(exc: PlanError, band: TcpBand | None, what: str = 'of this durat
     rows cannot all be met, with the constraints named; otherwise ``exc`` unchanged."""
     if band is None or 'cannot all be met' not in exc.message:
         return exc
+    # the smoothness limits are on iff the ramp floor is the constant-jerk one (2/3)
+    smooth = band.ramp_exponent != 0.5
+    ramp = ('v_min^2 / (2 r)' if not smooth else f'{band.ramp_exponent:.3g} v_min^2 / r')
     return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
                      f'{band_text(band)} together with the robot limits ({exc.message}; no '
-                     'single bound is broken on its own: the ramp acceleration v_min^2 / '
-                     '(2 r), the bends\' centripetal acceleration and the joint speeds at '
-                     'the floor all fit, so it is their combination with the torque limits '
-                     'and the duration)')
+                     f'single bound is broken on its own: the ramp acceleration {ramp}, '
+                     'the bends\' centripetal acceleration and the joint speeds at '
+                     'the floor all fit, so it is their combination with the torque limits'
+                     + (', the jerk and torque-rate limits (jerk_limits)' if smooth else '')
+                     + ' and the duration)')
 
 
 def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float,
