@@ -55,12 +55,13 @@ from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve,
                      SmoothLimits, TcpBand, Verification, verify_plan)
 
 
-#: the check plays every message interval shorter than SHORT_INTERVAL_S [s] at >= this many
+#: the check plays every message interval shorter than SHORT_INTERVAL_S [s] (the 1 ms
+#: twins, not every interval of a dense grid) at >= this many
 #: instants (others at >= 8 and play_rate_hz): the 1 ms twins around a blend end carry a
 #: spike of torque and TCP acceleration whose sampled peak moved by 0.2-2 % with the
 #: sampling phase at 10 samples (issue 28)
 PEAK_SAMPLES_PER_INTERVAL = 64
-SHORT_INTERVAL_S = 5e-3
+SHORT_INTERVAL_S = 1.5e-3
 
 
 @dataclass(frozen=True)

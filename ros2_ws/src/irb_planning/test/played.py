@@ -20,7 +20,7 @@ from irb_description.stamps import sec_nanosec
 
 RATE_HZ = 10_000.0
 #: [s] message intervals shorter than this are evaluated at every sample whatever the stride
-SHORT_INTERVAL_S = 5e-3
+SHORT_INTERVAL_S = 1.5e-3
 #: instants per short interval (besides the clock's)
 SHORT_SAMPLES = 64
 
