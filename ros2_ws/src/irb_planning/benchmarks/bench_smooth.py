@@ -3,7 +3,7 @@ type, with and without process constraints, each success played at 10 kHz by the
 independent player (test/played.py: quintic of the message's points on ns stamps, pinocchio
 TCP rates and torques).
 
-    python ros2_ws/src/irb_planning/benchmarks/bench_smooth.py [--count 200] [--grid 60]
+    python ros2_ws/src/irb_planning/benchmarks/bench_smooth.py [--n 200] [--grid 60]
 
 Per request: a path type in turn (circle, line, arc, polyline, spline), its geometry drawn at
 random in the reachable workspace (code 2 redraws), the time-optimal plan (T_min), then an
@@ -16,9 +16,20 @@ full-tolerance consistency (irb_description.trajectory_rules) of every message; 
 played peaks; the largest torque step between control samples (248 Hz, the holding torque
 before the start and after the end included); periodic closed-spline plan time against the
 same path at rest, same run.
+
+Smoothness limits (issue 28): every energy request is planned twice, by the default planner
+(jerk limits on) and by one with ``jerk_limits=False``: the energy cost of the limits
+(energy on / off - 1), the torque steps between control samples of both, and per smoothness
+limit the worst played / limit ratio (joint jerk and rigid-body torque rate from the
+independent player's samples, TCP jerk from the planner's own played check). Path types in
+turn: circle, line, arc, polyline, spline, and a closed spline planned periodic. The JSON is
+rewritten after every draw (``partial``: true until the run ends) with the random state;
+``--resume`` continues it (the planners' caches start empty again, so a resumed run's warm
+starts differ from an uninterrupted one's; the draws are the same).
 """
 import argparse
 import importlib.util
+import json
 import os
 import sys
 import time
@@ -26,7 +37,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from _common import dump
+from _common import RESULTS, dump
 
 from irb_description.trajectory_rules import worst_inconsistency
 from irb_planning.planner import Planner, PlannerSettings, request_path
@@ -38,11 +49,13 @@ played = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(played)
 
 CONTROL_PERIOD_S = 0.004032
-TYPES = ('circle', 'line', 'arc', 'polyline', 'spline')
+TYPES = ('circle', 'line', 'arc', 'polyline', 'spline', 'periodic')
 
 
 def draw(kind: str, rng) -> PlanRequest:
     """A random path request of ``kind`` (not yet checked for reachability)."""
+    if kind == 'periodic':
+        return replace(draw('spline', rng), closed=True, boundary='periodic')
     c = np.array([rng.uniform(0.45, 0.85), rng.uniform(-0.3, 0.3), rng.uniform(0.1, 0.6)])
     if kind == 'circle':
         return PlanRequest(center=c, radius=float(rng.uniform(0.05, 0.2)),
@@ -69,7 +82,7 @@ def draw(kind: str, rng) -> PlanRequest:
     return PlanRequest(path_type='spline', waypoints=way, closed=closed)
 
 
-def analyse(model, res, req) -> dict:
+def analyse(model, res, req, smooth=None, windows=None) -> dict:
     """The success played at 10 kHz: ratios to the limits, spacing, consistency, peaks."""
     tr, ver = res.trajectory, res.verification
     lim = model.limits
@@ -87,6 +100,28 @@ def analyse(model, res, req) -> dict:
             axis=0)) / lim.torque)),
         'energy_j': float(res.evaluation.energy),
     }
+    # smoothness as played (independent player's samples, 10 kHz / stride 2)
+    dt = np.diff(p.t)
+    jerk = np.abs(np.diff(p.qdd, axis=0)) / dt[:, None]
+    ti = p.t[p.idx]
+    rigid = p.tau - model.friction.torque(p.qd[p.idx])
+    rate = np.abs(np.diff(rigid, axis=0)) / np.diff(ti)[:, None]
+    # the twin intervals around a blend end's curvature jump: reported apart
+    out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
+    for lo, hi in (() if windows is None else windows):
+        out_j &= ~((p.t[1:] > lo) & (p.t[:-1] < hi))
+        out_r &= ~((ti[1:] > lo) & (ti[:-1] < hi))
+    if not out_j.all():
+        out['blend_end_joint_jerk_peak'] = float(jerk[~out_j].max())
+        out['blend_end_torque_rate_peak'] = float(rate[~out_r].max())
+    jerk, rate = jerk[out_j], rate[out_r]
+    out['joint_jerk_peak'] = jerk.max(axis=0).tolist()
+    out['torque_rate_peak'] = rate.max(axis=0).tolist()
+    out['tcp_jerk_peak'] = float(ver.tcp_jerk_peak)
+    if smooth is not None:
+        out['joint_jerk_ratio'] = float((jerk.max(axis=0) / smooth.jerk).max())
+        out['torque_rate_ratio'] = float((rate.max(axis=0) / smooth.torque_rate).max())
+        out['tcp_jerk_ratio'] = float(ver.tcp_jerk_peak / smooth.tcp_jerk)
     if req.tcp_accel_max > 0:
         out['tcp_accel_ratio'] = float(p.tcp_accel.max() / req.tcp_accel_max)
         out['reported_vs_played_tcp_accel'] = float(
@@ -103,6 +138,14 @@ def analyse(model, res, req) -> dict:
     out['torque_step_nm'] = float(steps.max())
     out['torque_step_at_ends_nm'] = float(max(steps[0].max(), steps[-1].max())) if rest \
         else 0.0
+    # the same without friction (its Coulomb level switches on when a joint starts to move,
+    # whatever the plan)
+    rig = c.tau - model.friction.torque(c.qd[c.idx])
+    rig = np.vstack([hold[0], rig, hold[1]]) if rest else rig
+    rsteps = np.abs(np.diff(rig, axis=0))
+    out['rigid_torque_step_nm'] = float(rsteps.max())
+    out['rigid_torque_step_at_ends_nm'] = float(max(rsteps[0].max(), rsteps[-1].max())) \
+        if rest else 0.0
     return out
 
 
@@ -154,19 +197,95 @@ def periodic_vs_rest(planner, rng, count: int) -> list:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--count', type=int, default=200, help='random requests (path draws)')
+    ap.add_argument('--n', '--count', dest='count', type=int, default=200,
+                    help='random requests (path draws)')
     ap.add_argument('--grid', type=int, default=60)
     ap.add_argument('--seed', type=int, default=28)
-    ap.add_argument('--periodic', type=int, default=3, help='closed splines, rest/periodic')
-    ap.add_argument('--name', default='smooth')
+    ap.add_argument('--periodic', type=int, default=2, help='closed splines, rest/periodic')
+    ap.add_argument('--name', default='smooth_jerk')
+    ap.add_argument('--resume', action='store_true',
+                    help='continue results/<name>.json (same seed and grid) after its last '
+                         'draw: its rows, refusals and random state are read back')
     a = ap.parse_args()
     planner = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2))
+    plain = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2,
+                                             jerk_limits=False))
+    smooth = planner.smooth_limits
     model = planner.model
     rng = np.random.default_rng(a.seed)
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    rows, refusals, unreachable = [], [], 0
-    for i in range(a.count):
+    rows, refusals, unreachable, costs = [], [], 0, []
+    start, periodic, runs = 0, None, []
+    if a.resume:
+        old_path = RESULTS / f'{a.name}.json'
+        if not old_path.is_file():
+            sys.exit(f'--resume: no {old_path}')
+        old = json.loads(old_path.read_text())
+        if old.get('seed') != a.seed or old.get('grid') != a.grid or 'rng_state' not in old:
+            sys.exit(f'--resume: {old_path} has another seed or grid, or no random state')
+        rows, refusals, costs = old['rows'], old['refusals'], old['energy_pairs']
+        unreachable, start, periodic = (old['unreachable_redraws'], old['done'],
+                                        old['periodic_closed_spline_vs_rest'])
+        runs = old.get('runs', [])
+        rng.bit_generator.state = old['rng_state']
+        print(f'resuming {old_path} after draw {start}', file=sys.stderr)
+
+    def worst(key, sel=lambda r: True):
+        vals = [r[key] for r in rows if key in r and sel(r)]
+        return max(vals) if vals else None
+
+    def med(key, sel=lambda r: True):
+        vals = [r[key] for r in rows if key in r and sel(r)]
+        return float(np.median(vals)) if vals else None
+
+    def write(done: int, partial: bool, periodic=None):
+        on = lambda r: r.get('jerk', True)            # noqa: E731
+        off = lambda r: not r.get('jerk', True)       # noqa: E731
+        cost = [c['cost'] for c in costs]
+        summary = {
+            'settings': {'joint_jerk_limit_rad_s3': list(smooth.jerk),
+                         'tcp_jerk_limit_m_s3': smooth.tcp_jerk,
+                         'torque_rate_limit_nm_s': list(smooth.torque_rate)},
+            'worst_played_over_limit': {k: worst(k, on) for k in (
+                'joint_speed_ratio', 'torque_ratio', 'tcp_accel_ratio', 'tcp_speed_ratio',
+                'joint_jerk_ratio', 'tcp_jerk_ratio', 'torque_rate_ratio')},
+            'smallest_point_spacing_s': min(r['min_spacing_s'] for r in rows if on(r))
+            if rows else None,
+            'all_consistent_full_tolerance': all(r['consistent_full_tolerance'] for r in rows),
+            'worst_reported_vs_played': {'torque': worst('reported_vs_played_torque', on),
+                                         'tcp_accel': worst('reported_vs_played_tcp_accel',
+                                                            on)},
+            'torque_step_nm_with_jerk_limit': {
+                'largest': worst('torque_step_nm', on),
+                'largest_rigid': worst('rigid_torque_step_nm', on),
+                'largest_rigid_at_rest_ends': worst('rigid_torque_step_at_ends_nm', on),
+                'median': med('torque_step_nm', on)},
+            'torque_step_nm_without': {
+                'largest': worst('torque_step_nm', off),
+                'largest_rigid': worst('rigid_torque_step_nm', off),
+                'largest_rigid_at_rest_ends': worst('rigid_torque_step_at_ends_nm', off),
+                'median': med('torque_step_nm', off)},
+            'energy_cost_of_jerk_limit': {
+                'pairs': len(cost), 'median': float(np.median(cost)) if cost else None,
+                'worst': float(np.max(cost)) if cost else None,
+                'best': float(np.min(cost)) if cost else None},
+        }
+        dump(a.name, {
+            'command': ' '.join(sys.argv), 'count': a.count, 'done': done, 'partial': partial,
+            'grid': a.grid, 'seed': a.seed, 'plans': len(rows), 'refusals': refusals,
+            'unreachable_redraws': unreachable, 'summary': summary,
+            'periodic_closed_spline_vs_rest': periodic, 'energy_pairs': costs,
+            'wall_s': time.perf_counter() - t0, 'load_start': load0,
+            'load_end': os.getloadavg(), 'rng_state': rng.bit_generator.state,
+            'runs': runs + [{'from_draw': start, 'to_draw': done,
+                             'wall_s': time.perf_counter() - t0, 'load_start': load0,
+                             'load_end': os.getloadavg()}],
+            'rows': rows})
+
+    if not a.resume:          # first: in every partial JSON
+        periodic = periodic_vs_rest(planner, rng, a.periodic)
+    for i in range(start, a.count):
         kind = TYPES[i % len(TYPES)]
         while True:
             req = draw(kind, rng)
@@ -181,49 +300,38 @@ def main():
                                  'message': exc.message[:300]})
                 opt = None
                 break
-        if opt is None:
-            continue
-        rows.append({'type': kind, 'objective': 'time', 'process': False,
-                     **analyse(model, opt, opt.request)})
-        T = float(rng.uniform(1.2, 2.5)) * opt.min_duration
-        req = replace(req, duration=T)
-        process = i % 2 == 1
-        if process:
-            req = replace(req, **band_for(req, opt, rng))
-        try:
-            res = planner.plan(req)
-            rows.append({'type': kind, 'objective': 'energy', 'process': process,
-                         **analyse(model, res, req)})
-        except PlanError as exc:
-            refusals.append({'type': kind, 'objective': 'energy', 'process': process,
-                             'code': exc.code, 'message': exc.message[:300]})
+        if opt is not None:
+            rows.append({'type': kind, 'objective': 'time', 'process': False, 'jerk': True,
+                         **analyse(model, opt, opt.request, smooth,
+                                   planner._blend_windows(opt.profile, request_path(req)))})
+            T = float(rng.uniform(1.2, 2.5)) * opt.min_duration
+            req = replace(req, duration=T)
+            process = i % 2 == 1
+            if process:
+                req = replace(req, **band_for(req, opt, rng))
+            pair = {}
+            for jerk, pl in ((True, planner), (False, plain)):
+                try:
+                    w = time.perf_counter()
+                    res = pl.plan(req)
+                    rows.append({'type': kind, 'objective': 'energy', 'process': process,
+                                 'jerk': jerk, 'plan_wall_s': time.perf_counter() - w,
+                                 **analyse(model, res, req, smooth if jerk else None,
+                                           pl._blend_windows(res.profile,
+                                                             request_path(req)))})
+                    pair[jerk] = res.evaluation.energy
+                except PlanError as exc:
+                    refusals.append({'type': kind, 'objective': 'energy', 'process': process,
+                                     'jerk': jerk, 'code': exc.code,
+                                     'message': exc.message[:300]})
+            if len(pair) == 2:
+                costs.append({'type': kind, 'process': process, 'energy_on_j': pair[True],
+                              'energy_off_j': pair[False],
+                              'cost': pair[True] / pair[False] - 1.0})
         print(f'{i + 1}/{a.count} {kind} done ({len(rows)} plans, {len(refusals)} refused)',
               file=sys.stderr)
-
-    def worst(key, sel=lambda r: True):
-        vals = [r[key] for r in rows if key in r and sel(r)]
-        return max(vals) if vals else None
-    summary = {
-        'worst_played_over_limit': {k: worst(k) for k in (
-            'joint_speed_ratio', 'torque_ratio', 'tcp_accel_ratio', 'tcp_speed_ratio')},
-        'smallest_point_spacing_s': min(r['min_spacing_s'] for r in rows) if rows else None,
-        'all_consistent_full_tolerance': all(r['consistent_full_tolerance'] for r in rows),
-        'worst_reported_vs_played': {'torque': worst('reported_vs_played_torque'),
-                                     'tcp_accel': worst('reported_vs_played_tcp_accel')},
-        'largest_joint_accel_rad_s2': worst('joint_accel_peak_rad_s2'),
-        'torque_step_nm': {'largest': worst('torque_step_nm'),
-                           'largest_at_rest_ends': worst('torque_step_at_ends_nm'),
-                           'median': float(np.median([r['torque_step_nm'] for r in rows]))
-                           if rows else None},
-        'jerk_limit': 'not implemented (see RESULTS.md): no figures with the limit',
-    }
-    periodic = periodic_vs_rest(planner, rng, a.periodic)
-    dump(a.name, {
-        'command': ' '.join(sys.argv), 'count': a.count, 'grid': a.grid, 'seed': a.seed,
-        'plans': len(rows), 'refusals': refusals, 'unreachable_redraws': unreachable,
-        'summary': summary, 'periodic_closed_spline_vs_rest': periodic,
-        'wall_s': time.perf_counter() - t0, 'load_start': load0, 'load_end': os.getloadavg(),
-        'rows': rows})
+        write(i + 1, True, periodic)            # after every draw: --resume loses none
+    write(a.count, False, periodic)
 
 
 if __name__ == '__main__':

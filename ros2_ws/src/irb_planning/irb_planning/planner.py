@@ -44,14 +44,24 @@ from .request import (ERROR_FRICTION_MAP, ERROR_INFEASIBLE_DURATION, ERROR_INVAL
                       ERROR_SOLVER, ERROR_UNREACHABLE, ENERGY_MECHANICAL, ENERGY_MODELS,
                       OBJECTIVE_ENERGY, OBJECTIVE_TIME,
                       OBJECTIVE_TRAPEZOID, PlanError, PlanRequest, validate)
-from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT,
+from .transcription import (BOUNDARY_PERIODIC, BOUNDARY_REST,
+                            RAMP_SPEED_EXPONENT, TIME_OBJECTIVE_ENERGY_WEIGHT, JerkPath,
                             SolveRequest, TcpPath, Transcription)
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, STAMP_RESOLUTION_S,
                                               gate_limit_notes, spaced, stamps_ns,
                                               worst_inconsistency)
-from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve, TcpBand,
-                     Verification, verify_plan)
+from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve,
+                     SmoothLimits, TcpBand, Verification, verify_plan)
+
+
+#: the check plays every message interval shorter than SHORT_INTERVAL_S [s] (the 1 ms
+#: twins, not every interval of a dense grid) at >= this many
+#: instants (others at >= 8 and play_rate_hz): the 1 ms twins around a blend end carry a
+#: spike of torque and TCP acceleration whose sampled peak moved by 0.2-2 % with the
+#: sampling phase at 10 samples (issue 28)
+PEAK_SAMPLES_PER_INTERVAL = 64
+SHORT_INTERVAL_S = 1.5e-3
 
 
 @dataclass(frozen=True)
@@ -85,6 +95,13 @@ class PlannerSettings:
     # > 0: a fixed-duration request at least this many times the optimiser's time-optimal
     # duration does not play and check the time-optimal profile (see Planner.min_duration)
     min_duration_check_factor: float = 0.0
+    # smoothness limits (issue 28), on by default: every plan keeps them as played, and a
+    # rest-to-rest plan starts and ends with theta_ddot = 0 (the static torque, no step)
+    jerk_limits: bool = True
+    joint_jerk_limit_rad_s3: tuple = (500.0, 500.0, 500.0)
+    tcp_jerk_limit_m_s3: float = 100.0
+    # rigid-body torque rate; default: each joint's torque limit in 50 ms
+    torque_rate_limit_nm_s: tuple = (14000.0, 18000.0, 9000.0)
 
 
 @dataclass
@@ -207,7 +224,8 @@ class Planner:
         band_rows = req.tcp_speed_max > 0 or req.tcp_speed_min > 0   # quarter-point rows
         key = (req.path_key, req.grid_size, req.boundary, fm.to_dict().__repr__(),
                req.energy_model) + (('tcp_accel',) if accel_rows else ()) \
-            + (('tcp_band',) if band_rows else ())
+            + (('tcp_band',) if band_rows else ()) \
+            + (('jerk',) if self.settings.jerk_limits else ())
         with self._cache_lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
@@ -231,13 +249,19 @@ class Planner:
             raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
         friction = casadi_friction(fm, s.friction_smoothing_rad_s)
         mode = ENERGY_MODELS[req.energy_model or ENERGY_MECHANICAL]
+        jerk = None
+        if s.jerk_limits:
+            try:
+                jerk = jerk_path(path, self.sample_path(path), theta, nodes, sides)
+            except UnreachableError as exc:
+                raise PlanError(ERROR_UNREACHABLE, f'path unreachable: {exc}') from None
         tr = Transcription(nodes, mids, friction, req.boundary, s.abs_smoothing_j_rad,
                            s.max_iterations, s.tolerance, s.warm_start, sides,
                            electrical=self.electrical if mode else None,
                            bus_mode=mode or 'shared',
                            electrical_smoothing=s.electrical_smoothing_w,
                            tcp=tcp_path(path, theta), accel_rows=accel_rows,
-                           band_rows=band_rows)
+                           band_rows=band_rows, jerk=jerk)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm
@@ -289,11 +313,32 @@ class Planner:
         vel = effective_speed_limit(lim.velocity, fm) * req.limit_scaling
         tau = lim.torque * req.limit_scaling
         keep = 1.0 - self.settings.constraint_margin
+        sm = self.smooth_limits
         nlp = SolveRequest(0.0, 0.0, 1.0, self.settings.min_theta_dot_rad_s, vel * keep,
                            tau * keep, req.tcp_speed_max * keep,
                            req.tcp_speed_min * (2.0 - keep), req.tcp_accel_max * keep,
-                           req.tcp_ramp_length)
+                           req.tcp_ramp_length,
+                           jerk_limit=None if sm is None else sm.jerk * keep,
+                           tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep)
         return nlp, LimitSet(vel, tau, lim.lower, lim.upper)
+
+    @property
+    def ramp_exponent(self) -> float:
+        """The tcp_speed_min floor over a rest ramp rises as (d / ramp)^this: 2/3 (a
+        constant-jerk start) with the jerk limits on, else 1/2 (constant acceleration)."""
+        return RAMP_SPEED_EXPONENT if self.settings.jerk_limits else 0.5
+
+    @property
+    def smooth_limits(self) -> SmoothLimits | None:
+        """The smoothness limits every plan keeps as played (None: jerk_limits off)."""
+        s = self.settings
+        if not s.jerk_limits:
+            return None
+        n = len(self.model.joint_names)
+        return SmoothLimits(np.broadcast_to(np.asarray(s.joint_jerk_limit_rad_s3, float),
+                                            (n,)).copy(), float(s.tcp_jerk_limit_m_s3),
+                            np.broadcast_to(np.asarray(s.torque_rate_limit_nm_s, float),
+                                            (n,)).copy())
 
     def _solve_checked(self, sreq: SolveRequest, checked: LimitSet, check, solve,
                        fixed_duration: float, band: TcpBand | None = None,
@@ -345,6 +390,7 @@ class Planner:
             over_tau = np.maximum(ev.peak_torque, ver.peak_torque) - checked.torque
             over_v = np.maximum(ev.peak_speed, ver.peak_speed) - checked.velocity
             tcp_fix = tighten_band(sreq, band, ver)
+            tcp_fix.update(self._tighten_smooth(sreq, ver))
             if not (np.any(over_tau > 0) or np.any(over_v > 0) or tcp_fix):
                 return res, profile, checks, notes          # not a limit: nothing to tighten
             tau = np.where(over_tau > 0, sreq.torque_limit - over_tau - 1e-3 * checked.torque,
@@ -361,6 +407,22 @@ class Planner:
             sreq = replace(sreq, torque_limit=tau, velocity_limit=vel, **tcp_fix)
         raise AssertionError('unreachable')
 
+    def _tighten_smooth(self, sreq: SolveRequest, ver: Verification) -> dict:
+        """SolveRequest fields of the smoothness limits the played trajectory broke: a joint's
+        jerk limit scaled by limit / played peak of its jerk or torque rate (- 0.1 %), the
+        TCP jerk likewise; {} if none."""
+        sm = self.smooth_limits
+        if sm is None or ver.peak_jerk is None or sreq.jerk_limit is None:
+            return {}
+        fix = {}
+        ratio = np.maximum(ver.peak_jerk / sm.jerk, ver.peak_torque_rate / sm.torque_rate)
+        if np.any(ratio > 1 + LIMIT_RTOL):
+            fix['jerk_limit'] = np.where(ratio > 1 + LIMIT_RTOL,
+                                         sreq.jerk_limit / ratio * 0.999, sreq.jerk_limit)
+        if sm.tcp_jerk > 0 and ver.tcp_jerk_peak > sm.tcp_jerk * (1 + LIMIT_RTOL):
+            fix['tcp_jerk_max'] = sreq.tcp_jerk_max * sm.tcp_jerk / ver.tcp_jerk_peak * 0.999
+        return fix
+
     def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, check,
                      band: TcpBand | None = None, far: float = 0.0) -> tuple[float, tuple]:
         """Time-optimal duration [s] (exact time law of a profile that passes the checks)
@@ -375,7 +437,8 @@ class Planner:
         requests shorter than it, and the plan returned is checked in full anyway. The
         checked value may be larger (a tightened limit slows the profile down); f leaves
         room for that."""
-        key = (base.min_theta_dot, tuple(base.velocity_limit), tuple(base.torque_limit))
+        key = (base.min_theta_dot, tuple(base.velocity_limit), tuple(base.torque_limit),
+               None if base.jerk_limit is None else tuple(base.jerk_limit), base.tcp_jerk_max)
         if band is not None:
             key += base.process_key
         with entry.lock:
@@ -428,6 +491,8 @@ class Planner:
         if entry.transcription.boundary == BOUNDARY_PERIODIC:
             return 2 * np.pi / delta
         h = np.diff(theta)
+        if entry.transcription.cubic_rest:      # rest intervals 3 h / delta (profile.py)
+            return float((theta[-2] - theta[1] + 3 * (h[0] + h[-1])) / delta)
         td = np.full(theta.size, delta)
         td[0] = td[-1] = 0.0
         a = np.zeros(theta.size)
@@ -496,7 +561,7 @@ class Planner:
             ev = evaluate(profile, sample, torque, checked, s.evaluation_rate_hz,
                           self.electrical)
             return (ev, *self.trajectory(profile, req, path, fm, raw_map, checked))
-        band = request_band(req)
+        band = request_band(req, self.ramp_exponent)
         t_max = self.max_duration(entry, base.min_theta_dot)
         if band is not None:
             check_band_fits(req, path, entry, t_max, checked.velocity)
@@ -618,8 +683,16 @@ class Planner:
             ver = verify_plan(t, jp.q, qd, qdd, prof, circle, kin, self.rigid_torque, friction,
                               req.boundary == BOUNDARY_REST, s.play_rate_hz,
                               path_tolerance_m=s.path_tolerance_m,
-                              electrical=self.electrical, band=request_band(req),
-                              stamp_resolution_s=STAMP_RESOLUTION_S)
+                              electrical=self.electrical,
+                              band=request_band(req, self.ramp_exponent),
+                              stamp_resolution_s=STAMP_RESOLUTION_S,
+                              min_samples_per_segment=np.where(
+                                  np.diff(t) < SHORT_INTERVAL_S, PEAK_SAMPLES_PER_INTERVAL,
+                                  8),
+                              # the trapezoid and Fourier baselines (b linear between nodes:
+                              # theta_ddot steps at every node) are played unlimited
+                              smooth=self.smooth_limits if profile.quadratic else None,
+                              smooth_exempt=self._blend_windows(profile, path))
             # also denser while the played (quintic) trajectory breaks a torque or speed
             # limit: between sparse points at speed through a tight blend its acceleration,
             # hence torque, leaves the profile's (the NLP cannot fix that by tightening)
@@ -637,6 +710,18 @@ class Planner:
                                 '(half the tolerances of irb_description.trajectory_rules)')
         tau = torque(jp.q, qd, qdd)
         return {'t': t, 'theta': theta, 'q': jp.q, 'qd': qd, 'qdd': qdd, 'tau': tau}, ver
+
+    def _blend_windows(self, profile: ThetaProfile, path: PathBase) -> np.ndarray | None:
+        """(B, 2) [s]: the message intervals between the twin points around each interior
+        piece end (where a circular blend's curvature jumps), which the smoothness check
+        reports apart (None: no piece ends)."""
+        inner = np.asarray(path.breaks, float)
+        inner = inner[(inner > 0) & (inner < 2 * np.pi)]
+        if inner.size == 0:
+            return None
+        t_b = profile.theta_at(inner)[0]
+        half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
+        return np.column_stack([t_b - half, t_b + half])
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the
@@ -669,12 +754,12 @@ def tcp_path(path: PathBase, theta: np.ndarray) -> TcpPath:
                    theta * path.length / (2 * np.pi))
 
 
-def request_band(req: PlanRequest) -> TcpBand | None:
+def request_band(req: PlanRequest, ramp_exponent: float = 0.5) -> TcpBand | None:
     """The request's process constraints as the independent check takes them (None: none)."""
     if not req.has_process:
         return None
     return TcpBand(req.tcp_speed_max, req.tcp_speed_min, req.tcp_accel_max,
-                   req.tcp_ramp_length)
+                   req.tcp_ramp_length, ramp_exponent)
 
 
 def band_text(band: TcpBand) -> str:
@@ -697,12 +782,16 @@ def _band_error(exc: PlanError, band: TcpBand | None, what: str = 'of this durat
     rows cannot all be met, with the constraints named; otherwise ``exc`` unchanged."""
     if band is None or 'cannot all be met' not in exc.message:
         return exc
+    # the smoothness limits are on iff the ramp floor is the constant-jerk one (2/3)
+    smooth = band.ramp_exponent != 0.5
+    ramp = ('v_min^2 / (2 r)' if not smooth else f'{band.ramp_exponent:.3g} v_min^2 / r')
     return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
                      f'{band_text(band)} together with the robot limits ({exc.message}; no '
-                     'single bound is broken on its own: the ramp acceleration v_min^2 / '
-                     '(2 r), the bends\' centripetal acceleration and the joint speeds at '
-                     'the floor all fit, so it is their combination with the torque limits '
-                     'and the duration)')
+                     f'single bound is broken on its own: the ramp acceleration {ramp}, '
+                     'the bends\' centripetal acceleration and the joint speeds at '
+                     'the floor all fit, so it is their combination with the torque limits'
+                     + (', the jerk and torque-rate limits (jerk_limits)' if smooth else '')
+                     + ' and the duration)')
 
 
 def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: float,
@@ -749,16 +838,17 @@ def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: floa
                f'radius {1e3 / kappa[k]:.1f} mm ({sig[k] * 1e3:.0f} mm along the path) is '
                f'{vmin ** 2 * kappa[k]:.3g} m/s^2 > tcp_accel_max {amax:g} m/s^2 (by '
                f'{100 * (vmin ** 2 * kappa[k] / amax - 1):.1f} %)')
-    if rest and amax > 0 and vmin ** 2 / (2 * r) > amax:
-        need = vmin ** 2 / (2 * r)
+    e = entry.transcription._ramp_power / 2       # the ramp floor v_min (d / r)^e
+    if rest and amax > 0 and e * vmin ** 2 / r > amax:
+        need = e * vmin ** 2 / r       # a = d(v^2 / 2)/d sigma of the floor, at its top
         no(f'reaching tcp_speed_min {vmin:g} m/s within the {r * 1e3:.1f} mm rest ramps '
-           f'needs a TCP acceleration of at least v^2 / (2 r) = {need:.4g} m/s^2 > '
+           f'needs a TCP acceleration of at least {e:.3g} v^2 / r = {need:.4g} m/s^2 > '
            f'tcp_accel_max {amax:g} m/s^2 (by {100 * (need / amax - 1):.1f} %); ramps of '
-           f'at least {vmin ** 2 / (2 * amax) * 1e3:.1f} mm fit')
+           f'at least {e * vmin ** 2 / amax * 1e3:.1f} mm fit')
     if velocity_limit is not None:        # joint speeds the floor needs: v |dq/dsigma|
         frac = (np.clip(np.minimum(sig, L - sig) / r, 0.0, 1.0) if rest
                 else np.ones(sig.size))
-        need = (vmin * np.sqrt(frac) / np.sqrt(s1))[:, None] * np.abs(entry.nodes.dq)
+        need = (vmin * frac ** e / np.sqrt(s1))[:, None] * np.abs(entry.nodes.dq)
         ratio = need / np.asarray(velocity_limit, float)[None, :]
         k, i = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
         if ratio[k, i] > 1.0:
@@ -838,6 +928,32 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
     theta = theta[keep]
     jp = JointPath(theta, jp.q[keep], jp.dq[keep], jp.ddq[keep])
     return stamps_ns(t[keep]), theta, td[keep], tdd[keep], jp
+
+
+def jerk_path(path: PathBase, sample, theta: np.ndarray, nodes, sides) -> JerkPath:
+    """The path's derivatives for the transcription's jerk rows: at 5 points of every
+    interval (just after its start, quarter points, just before its end: on its own side of
+    a piece end) Phi, Phi', Phi'' from ``sample`` and p', p'' from the path; the third
+    derivatives by the 5-point finite-difference stencils of the second (error O(h^4)).
+    ``nodes``, ``sides``: the transcription's dynamics, for the jump of c at piece ends."""
+    h = np.diff(theta)
+    K = h.size
+    offs = np.array([1e-7, 0.25, 0.5, 0.75, 1 - 1e-7])
+    th5 = (theta[:-1, None] + h[:, None] * offs[None, :]).ravel()
+    jp = sample(th5)
+    n = jp.q.shape[1]
+    dq, ddq = jp.dq.reshape(K, 5, n), jp.ddq.reshape(K, 5, n)
+    d1, d2 = path.d_point(th5).reshape(K, 5, 3), path.dd_point(th5).reshape(K, 5, 3)
+
+    def third(f):
+        d = (h / 4)[:, None]
+        f0, f1, f2, f3, f4 = (f[:, j] for j in range(5))
+        return np.stack([(-25 * f0 + 48 * f1 - 36 * f2 + 16 * f3 - 3 * f4) / (12 * d),
+                         (f0 - 8 * f1 + 8 * f3 - f4) / (12 * d),
+                         (3 * f0 - 16 * f1 + 36 * f2 - 48 * f3 + 25 * f4) / (12 * d)])
+
+    pick = lambda f: np.stack([f[:, 0], f[:, 2], f[:, 4]])  # noqa: E731
+    return JerkPath(pick(dq), pick(ddq), third(ddq), pick(d1), pick(d2), third(d2))
 
 
 def theta_grid(n: int, breaks: np.ndarray, min_intervals: int = 8) -> np.ndarray:

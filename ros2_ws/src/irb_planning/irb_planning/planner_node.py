@@ -81,6 +81,14 @@ PARAMETERS = {
                                'electrical NLP objective [W]'),
     'electrical_config': ('electrical_config', "electrical-model YAML ('' = irb_description "
                           "config/electrical.yaml) [-]"),
+    'jerk_limits': ('jerk_limits', 'smoothness limits on: joint jerk, TCP jerk and torque '
+                    'rate kept as played, rest-to-rest plans start and end at the static '
+                    'torque [-]'),
+    'joint_jerk_limit_rad_s3': ('joint_jerk_limit_rad_s3', 'joint jerk limit per joint '
+                                '[rad/s^3]'),
+    'tcp_jerk_limit_m_s3': ('tcp_jerk_limit_m_s3', 'limit of the TCP jerk magnitude [m/s^3]'),
+    'torque_rate_limit_nm_s': ('torque_rate_limit_nm_s', 'rate of the rigid-body torque '
+                               'per joint [N m/s]'),
 }
 #: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
 MAP_DIRS = 'friction_map_dirs'
@@ -172,7 +180,8 @@ class PlannerNode(Node):
         super().__init__('planner', **kwargs)
         defaults = PlannerSettings()
         for name, (fieldname, text) in PARAMETERS.items():
-            self.declare_parameter(name, getattr(defaults, fieldname),
+            value = getattr(defaults, fieldname)
+            self.declare_parameter(name, list(value) if isinstance(value, tuple) else value,
                                    ParameterDescriptor(description=text, read_only=True))
         dirs = self.declare_parameter(MAP_DIRS, Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description='directories friction-map files may be read from; empty = the share '

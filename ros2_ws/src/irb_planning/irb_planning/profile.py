@@ -141,15 +141,56 @@ class ThetaProfile:
             if a.shape != th.shape or not np.all(np.isfinite(a)):
                 raise ValueError('theta_ddot must be finite with the shape of theta')
             b, h = td ** 2, np.diff(th)
-            gap = np.abs(np.diff(b) - (a[:-1] + a[1:]) * h)
+            w = np.ones(h.size)
+            w[0] = 1.5 if (td[0] == 0 and a[0] == 0) else 1.0
+            w[-1] = 1.5 if (td[-1] == 0 and a[-1] == 0) else w[-1]
+            gap = np.abs(np.diff(b) - w * (a[:-1] + a[1:]) * h)
             if np.any(gap > CONSISTENCY_RTOL * max(1.0, float(b.max()))):
                 raise ValueError('theta_ddot inconsistent with theta_dot: b_{k+1} - b_k != '
                                  f'(a_k + a_{{k+1}}) dtheta_k (worst {gap.max():.3g})')
-            if np.any(interval_min_b(b[:-1], a[:-1], (a[1:] - a[:-1]) / h, h)
-                      < -CONSISTENCY_RTOL * max(1.0, float(b.max()))):
+            low = interval_min_b(b[:-1], a[:-1], (a[1:] - a[:-1]) / h, h)
+            low[w > 1.0] = 0.0          # cubic rest intervals: b monotone from 0
+            if np.any(low < -CONSISTENCY_RTOL * max(1.0, float(b.max()))):
                 raise ValueError('theta_dot^2 of the quadratic profile goes negative inside an '
                                  'interval')
         object.__setattr__(self, '_law', self._time_law())
+
+    @property
+    def cubic_ends(self) -> tuple[bool, bool]:
+        """(start, end): whether the first / last interval is a cubic rest interval (module
+        docstring: b = a = 0 at that rest node of a quadratic profile)."""
+        if not self.quadratic:
+            return (False, False)
+        a, td = self.node_theta_ddot, self.theta_dot
+        return (bool(td[0] == 0 and a[0] == 0), bool(td[-1] == 0 and a[-1] == 0))
+
+    def _cubic(self, end: bool):
+        """(h, t_interval, j) of the cubic rest interval at the start / ``end``."""
+        k = -2 if end else 1
+        h = float(self.theta[-1] - self.theta[-2]) if end else float(self.theta[1]
+                                                                     - self.theta[0])
+        sq = float(self.theta_dot[k])
+        t_int = 3.0 * h / sq
+        return h, t_int, abs(float(self.node_theta_ddot[k])) / t_int
+
+    def _cubic_at_time(self, end: bool, tau):
+        """(s, theta_dot, theta_ddot) at time tau [s] from the interval's start."""
+        h, t_int, j = self._cubic(end)
+        tau = np.clip(tau, 0.0, t_int)
+        if not end:
+            return j * tau ** 3 / 6.0, 0.5 * j * tau ** 2, j * tau
+        r = t_int - tau
+        return h - j * r ** 3 / 6.0, 0.5 * j * r ** 2, -j * r
+
+    def _cubic_at_s(self, end: bool, s):
+        """(tau from the interval's start [s], theta_dot, theta_ddot) at offset s [rad]."""
+        h, t_int, j = self._cubic(end)
+        s = np.clip(s, 0.0, h)
+        if not end:
+            tau = np.cbrt(6.0 * s / j)
+            return tau, 0.5 * j * tau ** 2, j * tau
+        r = np.cbrt(6.0 * (h - s) / j)
+        return t_int - r, 0.5 * j * r ** 2, -j * r
 
     @property
     def quadratic(self) -> bool:
@@ -168,7 +209,13 @@ class ThetaProfile:
     def _time_law(self):
         """Node times t_k (N,) [s] of the exact law."""
         b0, a0, kappa, h = self._coefficients()
-        dt = time_to(b0, a0, kappa, h, self.theta_dot[1:] ** 2)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            dt = time_to(b0, a0, kappa, h, self.theta_dot[1:] ** 2)
+        start, end = self.cubic_ends
+        if start:
+            dt[0] = self._cubic(False)[1]
+        if end:
+            dt[-1] = self._cubic(True)[1]
         if not np.all(np.isfinite(dt)):
             k = int(np.argmax(~np.isfinite(dt)))
             raise ValueError(f'theta_dot reaches 0 inside interval {k} (no finite time)')
@@ -216,7 +263,20 @@ class ThetaProfile:
             hi = np.where(later, mid, hi)
             lo = np.where(later, lo, mid)
         s = np.where(tau <= 0.0, 0.0, np.where(t >= tk[k + 1], h, 0.5 * (lo + hi)))
-        return self.theta[k] + s, self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s
+        td, tdd = self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s
+        for end, mask in zip((False, True), self._cubic_masks(k)):
+            if np.any(mask):
+                s_c, td_c, tdd_c = self._cubic_at_time(end, tau[mask])
+                s, td, tdd = s.copy(), td.copy(), tdd.copy()
+                s[mask], td[mask], tdd[mask] = s_c, td_c, tdd_c
+        return self.theta[k] + s, td, tdd
+
+    def _cubic_masks(self, k):
+        """Which of the interval indices k lie in the cubic rest intervals (start, end)."""
+        start, end = self.cubic_ends
+        last = self.theta.size - 2
+        return ((k == 0) if start else np.zeros(k.shape, bool),
+                (k == last) if end else np.zeros(k.shape, bool))
 
     def _speed(self, k, s, b0, a0, kappa, h):
         """theta_dot at offset s into interval k; the node values exactly at the nodes."""
@@ -232,8 +292,15 @@ class ThetaProfile:
         b0, a0, kappa, h = (c[k] for c in self._coefficients())
         s = theta - self.theta[k]
         b_s = np.where(s >= h, self.theta_dot[k + 1] ** 2, b0 + 2.0 * a0 * s + kappa * s ** 2)
-        return (self._law[k] + time_to(b0, a0, kappa, s, b_s),
-                self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            t = self._law[k] + time_to(b0, a0, kappa, s, b_s)
+        td, tdd = self._speed(k, s, b0, a0, kappa, h), a0 + kappa * s
+        for end, mask in zip((False, True), self._cubic_masks(k)):
+            if np.any(mask):
+                tau, td_c, tdd_c = self._cubic_at_s(end, s[mask])
+                t, td, tdd = t.copy(), td.copy(), tdd.copy()
+                t[mask], td[mask], tdd[mask] = self._law[k[mask]] + tau, td_c, tdd_c
+        return t, td, tdd
 
     def scaled_in_time(self, factor: float) -> 'ThetaProfile':
         """The same path speed shape run ``factor`` times slower (duration x factor)."""

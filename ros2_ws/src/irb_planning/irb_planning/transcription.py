@@ -64,6 +64,20 @@ the objective with weight 1e-6 so that its variables remain determined.
 The NLP is built once per (path, grid, boundary, friction, energy model, acceleration rows);
 duration, weights, delta, the limits and the process constraints are parameters or bounds,
 so a new request only re-solves (warm-started from the last solution). No ROS imports.
+
+Smoothness limits (``jerk`` = a ``JerkPath``, issue 28). On interval k theta_ddot is linear in
+theta, so the path jerk is d theta_ddot / dt = kappa_k theta_dot (kappa_k = (a_{k+1} - a_k) /
+h_k), and the joint jerk is exactly
+    d3q/dt3 = Phi^(3) theta_dot^3 + 3 Phi'' theta_dot theta_ddot + Phi' d3theta/dt3
+            = sqrt(b) (Phi^(3) b + 3 Phi'' a + Phi' kappa_k);
+the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3|^2 <=
+J_tcp^2 at both ends and the midpoint of every interval (each node from both sides). A
+rest-to-rest problem then has a = 0 at its rest nodes and cubic rest intervals (profile.py:
+constant path jerk from rest, theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the
+torque starts and ends at the static torque. Where the path's curvature jumps (a circular
+blend's end) the joint and TCP accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b:
+no motion exactly on the path has a finite jerk there at b > 0, so the rows hold on each side
+and the jump itself is the message's (two points 1 ms apart, planner.message_points).
 """
 from __future__ import annotations
 
@@ -105,6 +119,8 @@ class SolveRequest:
     tcp_speed_min: float = 0.0     # [m/s], 0 = none; away from the rest ends
     tcp_accel_max: float = 0.0     # [m/s^2], 0 = none (needs a problem with accel_rows)
     tcp_ramp_length: float = 0.0   # [m] of arc length at each rest end free of tcp_speed_min
+    jerk_limit: np.ndarray | None = None   # (n,) [rad/s^3]; None = none (needs ``jerk`` rows)
+    tcp_jerk_max: float = 0.0      # [m/s^3], 0 = none
 
     @property
     def process_key(self) -> tuple:
@@ -125,6 +141,43 @@ class TcpPath:
     d1_sides: np.ndarray
     d2_sides: np.ndarray
     sigma: np.ndarray
+
+
+#: the tcp_speed_min floor over a rest ramp, v >= v_min (d / r)^RAMP_SPEED_EXPONENT: 2/3 is
+#: the speed of a constant-jerk start (v ~ t^2, d ~ t^3), which the jerk limits allow
+RAMP_SPEED_EXPONENT = 2.0 / 3.0
+
+
+@dataclass(frozen=True)
+class JerkPath:
+    """The path's derivatives for the jerk rows, at three points of every interval (0: just
+    after its start node, 1: midpoint, 2: just before its end node; each on the interval's own
+    side of a piece end): dq, ddq, dddq (3, K, n) [rad/rad^k], tcp d1, d2, d3 (3, K, 3)
+    [m/rad^k]."""
+
+    dq: np.ndarray
+    ddq: np.ndarray
+    dddq: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    d3: np.ndarray
+
+
+def _frame_components(d1, d2, d3):
+    """p', p'', p^(3) (K, 3) in the path frame: (A, B, C) (K, 3), column j the component
+    along e_j of p^(3), p'', p' (e_1 = p' / |p'|, e_2 the unit part of p'' normal to it or
+    any unit normal where there is none, e_3 = e_1 x e_2)."""
+    e1 = d1 / np.linalg.norm(d1, axis=1, keepdims=True)
+    nrm = d2 - (d2 * e1).sum(axis=1, keepdims=True) * e1
+    size = np.linalg.norm(nrm, axis=1, keepdims=True)
+    other = np.where(np.abs(e1[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    alt = np.cross(e1, other)
+    e2 = np.where(size > 1e-9, nrm / np.maximum(size, 1e-300), alt)
+    e2 /= np.linalg.norm(e2, axis=1, keepdims=True)
+    e3 = np.cross(e1, e2)
+    E = np.stack([e1, e2, e3], axis=2)                   # (K, 3 xyz, 3 frame)
+    comp = lambda v: np.einsum('kx,kxj->kj', v, E)       # noqa: E731
+    return comp(d3), comp(d2), comp(d1)
 
 
 @dataclass(frozen=True)
@@ -153,7 +206,8 @@ class Transcription:
                  max_iter: int = 500, tol: float = 1e-8, warm_start: bool = True,
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
-                 accel_rows: bool = False, band_rows: bool = False):
+                 accel_rows: bool = False, band_rows: bool = False,
+                 jerk: JerkPath | None = None):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
@@ -166,6 +220,10 @@ class Transcription:
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
         self.tcp, self.accel_rows = tcp, bool(accel_rows and tcp is not None)
         self.band_rows = bool(band_rows)
+        self.jerk = jerk
+        self.cubic_rest = jerk is not None and boundary == BOUNDARY_REST
+        # the ramp floor on b = v^2: (d / r)^(4/3) with cubic rest ends, else (d / r)^1
+        self._ramp_power = 2 * RAMP_SPEED_EXPONENT if self.cubic_rest else 1.0
         self.abs_smoothing = float(abs_smoothing)
         self._lock = threading.Lock()
         self._last = None
@@ -200,12 +258,24 @@ class Transcription:
         D = ca.DM(dth)
         J = TIME_SUBSTEPS
         b_sub = [quadratic_b(b[:-1], a[:-1], a[1:], D, D * (j / J)) for j in range(1, J)]
-        b_mid = b_sub[J // 2 - 1]
         a_mid = 0.5 * (a[:-1] + a[1:])
+        if self.cubic_rest:      # constant path jerk from / to rest: b = b_1 (s / h)^(4/3)
+            def ends(v, first, last):
+                return ca.vertcat(first, v[1:K - 1], last)
+            b_sub = [ends(b_sub[j - 1], b[1] * (j / J) ** (4 / 3),
+                          b[N - 2] * (1 - j / J) ** (4 / 3)) for j in range(1, J)]
+            a_mid = ends(a_mid, a[1] * 0.5 ** (1 / 3), a[N - 2] * 0.5 ** (1 / 3))
+        b_mid = b_sub[J // 2 - 1]
         safe_sqrt = lambda v: ca.sqrt(ca.fmax(v, 1e-12))  # noqa: E731  (rows may dip < 0)
         sb = ca.sqrt(b)
         pts = [sb[:-1]] + [safe_sqrt(bj) for bj in b_sub] + [sb[1:]]
-        duration = ca.sum1(sum(2 * D / J / (pts[j] + pts[j + 1]) for j in range(J)))
+        pieces = [2 * D / J / (pts[j] + pts[j + 1]) for j in range(J)]
+        if self.cubic_rest:      # exact: 3 h / sqrt(b_1), the pieces t ~ s^(1/3)
+            t0_, t1_ = 3 * dth[0] / safe_sqrt(b[1]), 3 * dth[-1] / safe_sqrt(b[N - 2])
+            w = [((j + 1) ** (1 / 3) - j ** (1 / 3)) / J ** (1 / 3) for j in range(J)]
+            pieces = [ends(pc, t0_ * w[j], t1_ * w[J - 1 - j])
+                      for j, pc in enumerate(pieces)]
+        duration = ca.sum1(sum(pieces))
 
         # --- dynamics: torque along the path, affine in (a, b) apart from friction ------
         rep = lambda row: ca.repmat(ca.reshape(row, 1, -1), n, 1)  # noqa: E731
@@ -248,7 +318,6 @@ class Transcription:
         if electrical is not None:
             qd_n = ca.DM(nodes.dq.T) * rep(sb)
             qd_m = ca.DM(mids.dq.T) * rep(safe_sqrt(b_mid))
-            pieces = [2 * D / J / (pts[j] + pts[j + 1]) for j in range(J)]
             dt1, dt2 = sum(pieces[:J // 2]), sum(pieces[J // 2:])   # the halves of each k
 
             def el_energy(eps):
@@ -263,7 +332,10 @@ class Transcription:
             f = p[0] * energy + p[1] * duration
 
         # --- path constraints (rows; bounds are set per solve) ---------------------------
-        collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * D     # = 0 (b' = 2 a, exact)
+        wc = np.ones(K)
+        if self.cubic_rest:
+            wc[0] = wc[-1] = 1.5                     # b_1 = 1.5 a_1 h (a = 0 at rest)
+        collocation = b[1:] - b[:-1] - (a[:-1] + a[1:]) * ca.DM(dth * wc)   # = 0 (exact)
         # theta_dot >= delta between the samples: b at the 5 points of an interval minus the
         # largest dip of a convex quadratic between them (rows >= delta^2, interior intervals)
         dip = (a[1:] - a[:-1]) * D / (4 * TIME_SUBSTEPS ** 2)
@@ -293,6 +365,34 @@ class Transcription:
             acc_rows = ca.vertcat(*[ca.transpose(ca.sum1(r ** 2)) for r in acc])
             g_rows += [acc_rows]
             self._n_acc = acc_rows.numel()
+        self._n_jerk = self._n_tcp_jerk = 0
+        if jerk is not None:
+            kap = (a[1:] - a[:-1]) / D
+            b3 = [b[:-1], b_mid, b[1:]]
+            a3 = [a[:-1], a_mid, a[1:]]
+            sq3 = [safe_sqrt(v) for v in b3]
+            # path jerk kappa sqrt(b); constant on the cubic rest intervals
+            tj = [kap * sq for sq in sq3]
+            if self.cubic_rest:
+                j0 = a[1] * safe_sqrt(b[1]) / (3 * dth[0])
+                j1 = -a[N - 2] * safe_sqrt(b[N - 2]) / (3 * dth[-1])
+                tj = [ends(v, j0, j1) for v in tj]
+            qj, pj = [], []
+            for m in range(3):
+                bb, aa, sq, tt = (rep(v) for v in (b3[m], a3[m], sq3[m], tj[m]))
+                qj.append(ca.vec(ca.DM(jerk.dddq[m].T) * bb * sq
+                                 + 3 * ca.DM(jerk.ddq[m].T) * sq * aa
+                                 + ca.DM(jerk.dq[m].T) * tt))
+                # TCP: components in the path frame (tangent, normal, binormal), each
+                # within J_tcp / sqrt(3) (so the norm is within J_tcp); a row for |.|^2 made
+                # IPOPT take > 10x the iterations
+                A, B, C = _frame_components(jerk.d1[m], jerk.d2[m], jerk.d3[m])
+                rep3 = lambda row: ca.repmat(ca.reshape(row, 1, -1), 3, 1)  # noqa: E731
+                pj.append(ca.vec(ca.DM(A.T) * rep3(b3[m]) * rep3(sq3[m])
+                                 + 3 * ca.DM(B.T) * rep3(sq3[m]) * rep3(a3[m])
+                                 + ca.DM(C.T) * rep3(tj[m])))
+            g_rows += [ca.vertcat(*qj), ca.vertcat(*pj)]
+            self._n_jerk, self._n_tcp_jerk = 3 * K * n, 9 * K
         g = ca.vertcat(*g_rows)
         self._rows = np.cumsum([0] + [r.numel() for r in g_rows])
 
@@ -322,15 +422,18 @@ class Transcription:
         else:
             lbb, ubb = np.full(N - 1, lo), beta_n[:-1]
         lba, uba = np.full(self._na, -np.inf), np.full(self._na, np.inf)
-        if self.boundary == BOUNDARY_REST:
+        if self.cubic_rest:
+            # theta_ddot = 0 at rest (no torque step); b_1 >= delta^2 bounds the rest time
+            lba[0] = uba[0] = lba[-1] = uba[-1] = 0.0
+        elif self.boundary == BOUNDARY_REST:
             # leave and reach rest no slower than b(s) = delta^2 s / h (finite, short time)
             h = np.diff(self.nodes.theta)
             lba[0] = lo / (2 * h[0])
             uba[-1] = -lo / (2 * h[-1])
         # process constraints: a cap and a floor on b (inf / 0 where none: the same numbers)
         cap_n, cap_m, floor_n, floor_k, a_rest = self._tcp_bounds(req)
-        if self.boundary == BOUNDARY_REST:         # leave / reach rest at least as fast as
-            lba[0] = max(lba[0], a_rest[0])         # the ramp floor rises
+        if self.boundary == BOUNDARY_REST and not self.cubic_rest:   # leave / reach rest at
+            lba[0] = max(lba[0], a_rest[0])         # least as fast as the ramp floor rises
             uba[-1] = min(uba[-1], -a_rest[1])
         beta_m = np.minimum(beta_m, cap_m)
         if self.boundary == BOUNDARY_REST:
@@ -378,6 +481,15 @@ class Transcription:
             lbg += [np.full(self._n_acc, -np.inf)]
             ubg += [np.full(self._n_acc, req.tcp_accel_max ** 2 if req.tcp_accel_max > 0
                             else np.inf)]
+        if self._n_jerk:
+            jl = (np.full(self.n, np.inf) if req.jerk_limit is None
+                  else np.asarray(req.jerk_limit, float))
+            jl = np.tile(jl, 3 * K)
+            pl = req.tcp_jerk_max / np.sqrt(3) if req.tcp_jerk_max > 0 else np.inf
+            lbg += [-jl, np.full(self._n_tcp_jerk, -pl)]
+            ubg += [jl, np.full(self._n_tcp_jerk, pl)]
+        elif req.jerk_limit is not None or req.tcp_jerk_max > 0:
+            raise ValueError('jerk limits need a problem built with jerk rows')
         return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
 
     def _tcp_bounds(self, req: SolveRequest):
@@ -409,10 +521,10 @@ class Transcription:
                 r = req.tcp_ramp_length
                 frac = self._ramp_fraction(sig, r)
                 frac[0] = frac[-1] = 0.0              # b = 0 at the rest nodes
-                floor_n = v2 * frac / s1n
+                floor_n = v2 * frac ** self._ramp_power / s1n
                 fk = self._ramp_fraction(0.5 * (sig[:-1] + sig[1:]), r)  # at the midpoints
                 fk[0] = fk[-1] = 0.0                  # the rest intervals: a_rest
-                floor_k = v2 * fk / s1m
+                floor_k = v2 * fk ** self._ramp_power / s1m
                 a_rest = v2 / (2 * r * np.sqrt(s1n[[0, -1]]))
             else:
                 floor_k = v2 / s1m
@@ -449,7 +561,7 @@ class Transcription:
             frac[:, 0] = frac[:, -1] = 0.0
         else:
             frac = np.ones_like(sig_p)
-        fp = v2 * frac / s1
+        fp = v2 * frac ** self._ramp_power / s1
         lo_nb = np.minimum(fp, np.vstack([fp[:1], fp[:-1]]))
         lo_nb = np.minimum(lo_nb, np.vstack([fp[1:], fp[-1:]]))
         return fp[1:-1], lo_nb
@@ -461,13 +573,28 @@ class Transcription:
             b0 = (2 * np.pi / req.duration) ** 2
         else:
             b0 = 0.25 * np.min(ubx[:nb])
-        xb = np.clip(np.full(nb, b0), lbx[:nb], 0.95 * ubx[:nb])
-        if self.boundary == BOUNDARY_REST:
+        if self.cubic_rest:
+            # jerk rows: leave and reach rest smoothly, b = b0 sin^2 over 15 % of the path
+            # at each end (a = b' / 2 = 0 at rest), b0 raised for the time the ramps lose
+            th = self.nodes.theta
+            r = 0.15 * 2 * np.pi
+            w = np.sin(0.5 * np.pi * np.clip(np.minimum(th, th[-1] - th) / r, 0, 1)) ** 2
+            dw = np.where((th < r), 1.0, np.where(th[-1] - th < r, -1.0, 0.0)) * (
+                0.5 * np.pi / r) * np.sin(np.pi * np.clip(np.minimum(th, th[-1] - th) / r,
+                                                          0, 1))
+            b0 *= 1.4
+            xb = np.clip(b0 * w[1:-1], lbx[:nb], 0.95 * ubx[:nb])
             b = np.concatenate([[0.0], xb, [0.0]])
+            a = 0.5 * b0 * dw
+            a[0] = a[-1] = 0.0
         else:
-            b = np.append(xb, xb[0])
-        # node a consistent with b on average (the collocation rows are met by the solver)
-        a = linear_node_accelerations(self.nodes.theta, b)[:na]
+            xb = np.clip(np.full(nb, b0), lbx[:nb], 0.95 * ubx[:nb])
+            if self.boundary == BOUNDARY_REST:
+                b = np.concatenate([[0.0], xb, [0.0]])
+            else:
+                b = np.append(xb, xb[0])
+            # node a consistent with b on average (the collocation rows are met by the solver)
+            a = linear_node_accelerations(self.nodes.theta, b)[:na]
         return self._with_epigraph(np.concatenate([xb, a, np.zeros(self._ne)]), 1e-3)
 
     def _with_epigraph(self, x: np.ndarray, push: float = 0.0) -> np.ndarray:

@@ -26,7 +26,12 @@ profile's time law:
   acceleration from its own DH kinematics, differentiated in closed form through the DH
   product (v = dp/dt, a = d2p/dt2 from q, qd, qdd), the speed band (the floor only where the
   TCP's own projection onto the path is beyond the ramp length of arc length from both
-  rest ends, the arc length from its own table of the path) and |a|.
+  rest ends, the arc length from its own table of the path) and |a|;
+* **smoothness** (``SmoothLimits``) along the played trajectory: joint jerk from the quintic
+  polynomials' own third derivative, TCP jerk and the rate of the rigid-body torque as finite
+  differences of the played samples (TCP acceleration from the DH product above, torque from
+  the given function; friction's Coulomb step when a joint starts is left out: it is the same
+  for every plan that moves that joint).
 """
 from __future__ import annotations
 
@@ -183,12 +188,13 @@ class ArmKinematics:
             T = T @ A
         return T[:, :3, 3]
 
-    def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                  positions: bool = False) -> tuple[np.ndarray, ...]:
         """TCP velocity and acceleration (M, 3) [m/s, m/s^2] of joint motions (M, 3): the DH
         product differentiated in time, T' = sum of the products with one A_i replaced by
         dA_i/dt (A_i' qd_i), T'' likewise with A_i'' qd_i^2 + A_i' qdd_i and 2 A_i' A_j'
-        terms, carried along the product as (T, T', T'')."""
+        terms, carried along the product as (T, T', T''). ``positions``: (p, v, a), p the
+        TCP of the same product (= ``tcp``)."""
         M = q.shape[0]
         q6, v6, a6 = (np.zeros((M, 6)) for _ in range(3))
         q6[:, :q.shape[1]], v6[:, :q.shape[1]], a6[:, :q.shape[1]] = q, qd, qdd
@@ -213,19 +219,33 @@ class ArmKinematics:
             Ad = dA * w                                   # dA/dt
             Add = ddA * w ** 2 + dA * wd                  # d2A/dt2
             T, T1, T2 = T @ A, T1 @ A + T @ Ad, T2 @ A + 2 * T1 @ Ad + T @ Add
+        if positions:
+            return T[:, :3, 3], T1[:, :3, 3], T2[:, :3, 3]
         return T1[:, :3, 3], T2[:, :3, 3]
+
+
+@dataclass(frozen=True)
+class SmoothLimits:
+    """Smoothness limits to check: joint jerk (n,) [rad/s^3], |TCP jerk| [m/s^3] (0 = none),
+    rate of the rigid-body torque (n,) [N m/s]."""
+
+    jerk: np.ndarray
+    tcp_jerk: float
+    torque_rate: np.ndarray
 
 
 @dataclass(frozen=True)
 class TcpBand:
     """Process constraints to check (0 = none): TCP speed ceiling and floor [m/s], the
     floor away from the rest ends beyond ``ramp_length`` [m] of arc length (the whole path
-    if the plan is periodic), bound on |TCP acceleration| [m/s^2]."""
+    if the plan is periodic), bound on |TCP acceleration| [m/s^2]. Over the ramps the floor
+    is v_min (d / ramp_length)^ramp_exponent (d the distance to the nearer rest end)."""
 
     speed_max: float = 0.0
     speed_min: float = 0.0
     accel_max: float = 0.0
     ramp_length: float = 0.0
+    ramp_exponent: float = 0.5
 
     @property
     def active(self) -> bool:
@@ -292,6 +312,11 @@ class Verification:
     tcp_speed_low: float = float('nan')     # [m/s] lowest away from the rest ends
     tcp_accel_peak: float = float('nan')    # [m/s^2] largest |TCP acceleration|
     tcp_floor_ratio: float = float('nan')   # lowest speed / floor (floor rising over ramps)
+    peak_jerk: np.ndarray | None = None     # (n,) [rad/s^3] as played
+    tcp_jerk_peak: float = float('nan')     # [m/s^3] as played
+    peak_torque_rate: np.ndarray | None = None   # (n,) [N m/s] rigid-body torque, as played
+    tau_rigid: np.ndarray = field(repr=False, default=None)   # played, without friction
+    blend_end_peaks: dict = field(default_factory=dict)   # the same inside exempt windows
 
     @property
     def ok(self) -> bool:
@@ -330,6 +355,21 @@ def _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1):
         left_rest = theta_dot[k] == 0 and lo == theta_nodes[k]
         right_rest = theta_dot[k + 1] == 0 and hi == theta_nodes[k + 1]
         kappa = (a1 - a0) / h
+        if theta_dot[k] == 0 and a0 == 0:
+            # constant path jerk from rest: b = b1 (s / h)^(4/3), theta_dot ~ s^(2/3)
+            c = theta_dot[k + 1] / h ** (2 / 3)
+            total += quad(lambda x: 1 / c, lo, hi, weight='alg', wvar=(-2 / 3, 0.0),
+                          epsabs=0.0, epsrel=1e-10)[0] if lo == theta_nodes[k] else \
+                quad(lambda x: 1 / (c * (x - theta_nodes[k]) ** (2 / 3)), lo, hi,
+                     epsabs=0.0, epsrel=1e-10)[0]
+            continue
+        if theta_dot[k + 1] == 0 and a1 == 0:
+            c = theta_dot[k] / h ** (2 / 3)
+            total += quad(lambda x: 1 / c, lo, hi, weight='alg', wvar=(0.0, -2 / 3),
+                          epsabs=0.0, epsrel=1e-10)[0] if hi == theta_nodes[k + 1] else \
+                quad(lambda x: 1 / (c * (theta_nodes[k + 1] - x) ** (2 / 3)), lo, hi,
+                     epsabs=0.0, epsrel=1e-10)[0]
+            continue
         if left_rest:      # b = s (2 a0 + kappa s): quad's 1/sqrt weight takes the 1/sqrt(s)
             val = quad(lambda x: 1 / np.sqrt(max(2 * a0 + kappa * (x - lo), 1e-300)), lo, hi,
                        weight='alg', wvar=(-0.5, 0.0), epsabs=0.0, epsrel=1e-10,
@@ -345,7 +385,7 @@ def _segment_time(theta_nodes, theta_dot, theta_ddot, th0, th1):
     return total
 
 
-def quintic(t0, t1, p0, p1, rate: float, min_samples: int):
+def quintic(t0, t1, p0, p1, rate: float, min_samples: int, jerk: bool = False):
     """Sample the quintic Hermite segments between points (positions, velocities,
     accelerations p0/p1 = (q, qd, qdd), each (K, n)) over [t0, t1] (K,): (t, q, qd, qdd),
     each segment at max(min_samples, T rate) instants from its start (end excluded)."""
@@ -370,6 +410,8 @@ def quintic(t0, t1, p0, p1, rate: float, min_samples: int):
     q = c0 + S * (c1 + S * (c2 + S * (c3 + S * (c4 + S * c5))))
     qd = c1 + S * (2 * c2 + S * (3 * c3 + S * (4 * c4 + S * 5 * c5)))
     qdd = 2 * c2 + S * (6 * c3 + S * (12 * c4 + S * 20 * c5))
+    if jerk:
+        return t0[seg] + s, q, qd, qdd, 6 * c3 + S * (24 * c4 + S * 60 * c5)
     return t0[seg] + s, q, qd, qdd
 
 
@@ -378,7 +420,9 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
                 rate_hz: float = 1000.0, min_samples_per_segment: int = 8,
                 path_tolerance_m: float = 1e-4, time_rtol: float = 1e-6,
                 electrical=None, band: TcpBand | None = None,
-                stamp_resolution_s: float = 0.0) -> Verification:
+                stamp_resolution_s: float = 0.0,
+                smooth: SmoothLimits | None = None,
+                smooth_exempt: np.ndarray | None = None) -> Verification:
     """Check a plan's trajectory message as played (see module docstring).
 
     t (K,) [s]; q, qd, qdd (K, n); profile = (theta, theta_dot, theta_ddot, quadratic): node
@@ -432,17 +476,22 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
     if rest and (np.abs(qd[0]).max() > 1e-9 or np.abs(qd[-1]).max() > 1e-9):
         problems.append('a rest-to-rest plan does not start and end at rest')
     # --- as played ------------------------------------------------------------------------
-    ts, qs, qds, qdds = quintic(t[:-1], t[1:], (q[:-1], qd[:-1], qdd[:-1]),
-                                (q[1:], qd[1:], qdd[1:]), rate_hz, min_samples_per_segment)
+    ts, qs, qds, qdds, jerk = quintic(t[:-1], t[1:], (q[:-1], qd[:-1], qdd[:-1]),
+                                      (q[1:], qd[1:], qdd[1:]), rate_hz,
+                                      min_samples_per_segment, jerk=True)
     ts, qs, qds, qdds = (np.concatenate([x, y[-1:]]) for x, y in
                          ((ts, t), (qs, q), (qds, qd), (qdds, qdd)))
-    dev = circle.deviation(kin.tcp(qs))
+    # TCP position, velocity, acceleration of every sample from one DH product pass (the
+    # deviation, the band and the TCP jerk share it: 2 passes cost half the check's time)
+    rates = kin.tcp_rates(qs, qds, qdds, positions=True)
+    dev = circle.deviation(rates[0])
     k = int(np.argmax(dev))
     if dev[k] > path_tolerance_m:
         problems.append(f'played by quintic interpolation the TCP leaves the path by '
                         f'{dev[k] * 1e3:.3f} mm at t = {ts[k]:.3f} s (> '
                         f'{path_tolerance_m * 1e3:g} mm)')
-    tau = np.asarray(rigid_torque(qs, qds, qdds), float) + friction(qds)
+    tau_r = np.asarray(rigid_torque(qs, qds, qdds), float)
+    tau = tau_r + friction(qds)
     peak_tau, peak_v = np.abs(tau).max(axis=0), np.abs(qds).max(axis=0)
     for i in range(n):
         if np.any(qs[:, i] < kin.lower[i] - 1e-9) or np.any(qs[:, i] > kin.upper[i] + 1e-9):
@@ -462,11 +511,51 @@ def verify_plan(t, q, qd, qdd, profile, circle: Circle | PathCurve, kin: ArmKine
         problems.append('non-finite torque')
     energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
     elec = electrical.breakdown(ts, tau, qds) if electrical is not None else {}
-    tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems)
+    tcp = (check_band(band, ts, qs, qds, qdds, circle, kin, rest, problems, rates)
            if band is not None and band.active else (np.nan,) * 4)
+    # smoothness: samples (jerk) and sample pairs (rates) inside an exempt window (the twin
+    # points around a blend end's curvature jump) are reported apart
+    dts = np.diff(ts)[:, None]
+    rate = np.abs(np.diff(tau_r, axis=0)) / dts
+    acc = rates[2]
+    tj = np.linalg.norm(np.diff(acc, axis=0), axis=1) / dts[:, 0]
+    out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
+    for lo, hi in (() if smooth_exempt is None else np.asarray(smooth_exempt, float)):
+        out_j &= ~((ts[:-1] >= lo) & (ts[:-1] < hi))
+        out_r &= ~((ts[1:] > lo) & (ts[:-1] < hi))
+    zero = np.zeros(n)
+    peak_j = np.abs(jerk[out_j]).max(axis=0) if out_j.any() else zero
+    peak_rate = rate[out_r].max(axis=0) if out_r.any() else zero
+    tcp_j = float(tj[out_r].max()) if out_r.any() else 0.0
+    blend = {}
+    if not out_j.all():
+        blend = {'joint_jerk': np.abs(jerk[~out_j]).max(axis=0),
+                 'torque_rate': rate[~out_r].max(axis=0), 'tcp_jerk': float(tj[~out_r].max())}
+    if smooth is not None:
+        check_smooth(smooth, ts, np.where(out_j[:, None], jerk, 0.0),
+                     np.where(out_r[:, None], rate, 0.0), np.where(out_r, tj, 0.0), problems)
     return Verification(problems, float(dev.max()), float(worst_time), energy,
                         float(t[-1] - t[0]), peak_tau, peak_v, ts, qs, qds, qdds, tau, elec,
-                        *tcp)
+                        *tcp, peak_j, tcp_j, peak_rate, tau_r, blend)
+
+
+def check_smooth(lim: SmoothLimits, ts, jerk, rate, tcp_jerk, problems: list) -> None:
+    """The smoothness limits on the played samples (jerk (M, n) at the samples, rate (M-1, n)
+    and tcp_jerk (M-1,) between them; 0 where exempt); a line per broken one in
+    ``problems``."""
+    for i in range(jerk.shape[1]):
+        k = int(np.argmax(np.abs(jerk[:, i])))
+        if abs(jerk[k, i]) > lim.jerk[i] * (1 + LIMIT_RTOL):
+            problems.append(f'joint {i + 1} jerk {abs(jerk[k, i]):.1f} rad/s^3 > '
+                            f'{lim.jerk[i]:g} at t = {ts[k]:.4f} s')
+        k = int(np.argmax(rate[:, i]))
+        if rate[k, i] > lim.torque_rate[i] * (1 + LIMIT_RTOL):
+            problems.append(f'joint {i + 1} torque rate {rate[k, i]:.0f} N m/s > '
+                            f'{lim.torque_rate[i]:g} at t = {ts[k]:.4f} s')
+    k = int(np.argmax(tcp_jerk))
+    if lim.tcp_jerk > 0 and tcp_jerk[k] > lim.tcp_jerk * (1 + LIMIT_RTOL):
+        problems.append(f'tcp jerk {tcp_jerk[k]:.1f} m/s^3 > {lim.tcp_jerk:g} at '
+                        f't = {ts[k]:.4f} s')
 
 
 #: [m] distance from a rest end within which a played sample counts as at rest (the
@@ -475,14 +564,15 @@ REST_SLACK_M = 1e-6
 
 
 def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, rest: bool,
-               problems: list) -> tuple[float, float, float, float]:
+               problems: list, rates: tuple | None = None) -> tuple[float, float, float, float]:
     """The process constraints on the played samples; appends a line per broken one to
     ``problems`` (worded without ' speed ' / ' torque ': they are not the joint limits whose
     breach makes the planner add message points). Returns (peak TCP speed, lowest TCP speed
-    away from the rest ends, peak |TCP acceleration|, lowest speed / floor)."""
-    vel, acc = kin.tcp_rates(qs, qds, qdds)
+    away from the rest ends, peak |TCP acceleration|, lowest speed / floor). ``rates``: the
+    samples' (p, v, a) of ``kin.tcp_rates(..., positions=True)`` if already computed."""
+    pos, vel, acc = rates if rates is not None else kin.tcp_rates(qs, qds, qdds, True)
     speed, amag = np.linalg.norm(vel, axis=1), np.linalg.norm(acc, axis=1)
-    theta = np.clip(circle.theta(kin.tcp(qs)), 0.0, 2 * np.pi)
+    theta = np.clip(circle.theta(pos), 0.0, 2 * np.pi)
     sigma = circle.arc_length(theta)
     length = float(circle.arc_length(np.array([2 * np.pi]))[0])
     # the floor: v_min beyond the ramps; over them v_min sqrt(d / ramp), d the distance to
@@ -494,7 +584,7 @@ def check_band(band: TcpBand, ts, qs, qds, qdds, circle, kin: ArmKinematics, res
             else np.ones(sigma.size))
     moving = frac >= 1.0
     low = float(speed[moving].min()) if np.any(moving) else float('nan')
-    floor = band.speed_min * np.sqrt(frac)
+    floor = band.speed_min * frac ** band.ramp_exponent
     ramp = (frac > 0) & ~moving
     ratio = float(np.min(speed[frac > 0] / floor[frac > 0])) if (
         band.speed_min > 0 and np.any(frac > 0)) else float('nan')

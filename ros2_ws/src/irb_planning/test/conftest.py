@@ -25,6 +25,14 @@ def planner(model, map_dir) -> Planner:
                                                  friction_map_dirs=(str(map_dir),)))
 
 
+@pytest.fixture(scope='session')
+def unlimited(model, map_dir) -> Planner:
+    """The test planner with the smoothness limits off (issue 28): the problem the trapezoid
+    baseline and the convex bound belong to (neither knows jerk or torque rate)."""
+    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID, jerk_limits=False,
+                                                 friction_map_dirs=(str(map_dir),)))
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(2024)

@@ -19,6 +19,10 @@ import numpy as np
 from irb_description.stamps import sec_nanosec
 
 RATE_HZ = 10_000.0
+#: [s] message intervals shorter than this are evaluated at every sample whatever the stride
+SHORT_INTERVAL_S = 1.5e-3
+#: instants per short interval (besides the clock's)
+SHORT_SAMPLES = 64
 
 
 @dataclass
@@ -42,11 +46,17 @@ def message_stamps(t) -> np.ndarray:
 def play(model, t, q, qd, qdd, rate: float = RATE_HZ, stride: int = 1) -> Played:
     """Play the message points (t (K,) [s] as planned; q, qd, qdd (K, n)) at ``rate``;
     ``stride`` > 1 evaluates the TCP and torque on every stride-th sample only (the peaks
-    of the quintic's q, qd, qdd keep the full rate)."""
+    of the quintic's q, qd, qdd keep the full rate; so do intervals shorter than
+    SHORT_INTERVAL_S)."""
     ts = message_stamps(t)
     q, qd, qdd = (np.asarray(x, float) for x in (q, qd, qdd))
     clock = ts[0] + np.arange(int(np.floor((ts[-1] - ts[0]) * rate)) + 1) / rate
-    tt = np.unique(np.concatenate([clock, ts]))
+    # intervals shorter than SHORT_INTERVAL_S (the twin points around a blend end, where the
+    # torque and TCP acceleration spike within 1 ms) also at SHORT_SAMPLES instants: their
+    # peaks then do not depend on the clock's phase (a controller's clock may hit the top)
+    short = np.flatnonzero(np.diff(ts) < SHORT_INTERVAL_S)
+    fine = [np.linspace(ts[j], ts[j + 1], SHORT_SAMPLES) for j in short]
+    tt = np.unique(np.concatenate([clock, ts] + fine))
     k = np.clip(np.searchsorted(ts, tt, side='right') - 1, 0, ts.size - 2)
     out_q, out_v, out_a = (np.empty((tt.size, q.shape[1])) for _ in range(3))
     for j in range(ts.size - 1):
@@ -62,8 +72,11 @@ def play(model, t, q, qd, qdd, rate: float = RATE_HZ, stride: int = 1) -> Played
             + c5 * s ** 5
         out_v[sel] = qd[j] + qdd[j] * s + 3 * c3 * s ** 2 + 4 * c4 * s ** 3 + 5 * c5 * s ** 4
         out_a[sel] = qdd[j] + 6 * c3 * s + 12 * c4 * s ** 2 + 20 * c5 * s ** 3
+    # every sample inside the short intervals, whatever the stride (a stride stepped over
+    # their spike: 45.36 vs 46.28 N m on joint 1 at stride 2)
+    inside = np.isin(k, short) if short.size else np.zeros(tt.size, bool)
     idx = np.unique(np.concatenate([np.arange(0, tt.size, stride),
-                                    np.searchsorted(tt, ts)]))
+                                    np.searchsorted(tt, ts), np.flatnonzero(inside)]))
     h = 1e-6
     vel, acc, tau = [], [], []
     for a, b, c in zip(out_q[idx], out_v[idx], out_a[idx]):

@@ -26,18 +26,24 @@ def t_min(planner):
     return planner.plan(PlanRequest(objective='time')).min_duration
 
 
-def test_time_optimal_profile_is_feasible_and_shortest(planner, t_min):
+def test_time_optimal_profile_is_feasible_and_shortest(planner, unlimited, t_min):
     res = planner.plan(PlanRequest(objective='time'))
     ev = _check(res)
     assert 0.3 < ev.duration < 2.0
-    # a trapezoid at the minimum duration breaks a limit: nothing is faster
+    # a trapezoid at the minimum duration breaks a limit: nothing is faster. The trapezoid
+    # (theta_ddot steps) is a witness of the problem without the smoothness limits only, so
+    # it is checked against that problem's minimum; the limits can only lengthen it
+    free = unlimited.plan(PlanRequest(objective='time'))
+    _check(free)
     with pytest.raises(PlanError) as info:
-        planner.plan(PlanRequest(objective='trapezoid', duration=t_min))
+        unlimited.plan(PlanRequest(objective='trapezoid', duration=free.min_duration))
     assert info.value.code == rq.ERROR_INFEASIBLE_DURATION
+    assert t_min >= free.min_duration * (1 - 1e-6)
 
 
 @pytest.mark.parametrize('factor', [1.5, 5.0])
-def test_energy_optimum_agrees_with_evaluator_and_beats_trapezoid(planner, t_min, factor):
+def test_energy_optimum_agrees_with_evaluator_and_beats_trapezoid(planner, unlimited, t_min,
+                                                                  factor):
     T = factor * t_min
     res = planner.plan(PlanRequest(duration=T))
     ev = _check(res)
@@ -50,7 +56,14 @@ def test_energy_optimum_agrees_with_evaluator_and_beats_trapezoid(planner, t_min
     assert bound <= ev.energy * (1 + AGREEMENT)
     assert bound >= 0.9 * ev.energy
     if factor < 2:     # where time is scarce the relaxation is tight (README: within 1 %)
-        assert bound >= 0.99 * res.optimizer_energy
+        # of the optimum of its own problem: the relaxation has no jerk or torque-rate rows
+        # (with them the optimum at 1.5 x their T_min is 10.7 % above it, issue 28), so the
+        # claim is checked on the problem without them, at factor x that problem's T_min
+        T_free = factor * unlimited.plan(PlanRequest(objective='time')).min_duration
+        free = unlimited.plan(PlanRequest(duration=T_free))
+        _check(free)
+        b_free = unlimited.bound(PlanRequest(duration=T_free), T_free)
+        assert 0.99 * free.optimizer_energy <= b_free <= free.optimizer_energy * (1 + 1e-6)
 
 
 def test_grid_convergence_near_the_time_optimum(planner, t_min):

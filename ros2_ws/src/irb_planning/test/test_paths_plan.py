@@ -44,7 +44,7 @@ def tcp(model, q):
 
 
 @pytest.mark.parametrize('name', sorted(SPECS))
-def test_energy_plans_on_every_path_type_stay_on_the_path(planner, model, name):
+def test_energy_plans_on_every_path_type_stay_on_the_path(planner, unlimited, model, name):
     spec = SPECS[name]
     path = path_from_spec(spec)
     T = 1.5 * planner.plan(req(spec, objective='time')).min_duration + 1.0
@@ -59,8 +59,12 @@ def test_energy_plans_on_every_path_type_stay_on_the_path(planner, model, name):
                         zip(r.trajectory['q'], r.trajectory['qd'])], axis=1)
     thd = r.profile.theta_at(r.trajectory['theta'])[1]
     assert_allclose(v, path.length / (2 * np.pi) * thd, atol=1e-9)
-    # the optimum uses no more energy than the trapezoid of the same duration
-    assert r.evaluation.energy <= r.baseline.energy * (1 + 1e-6)
+    # the optimum uses no more energy than the trapezoid of the same duration: of the problem
+    # the trapezoid is feasible for, the one without the smoothness limits (its theta_ddot
+    # steps break them; with them the line's optimum was 0.24 % above it)
+    free = unlimited.plan(req(spec, duration=T))
+    assert free.verification.ok and free.evaluation.ok
+    assert free.evaluation.energy <= free.baseline.energy * (1 + 1e-6)
 
 
 def test_the_trapezoid_runs_at_constant_tcp_speed_along_arc_length(planner, model):

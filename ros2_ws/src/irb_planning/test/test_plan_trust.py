@@ -34,8 +34,13 @@ def assert_executable(res, delta=DELTA):
     inside = (th > pr.theta[1]) & (th < pr.theta[-2])
     assert thd[inside].min() >= delta * (1 - 1e-6)
     assert thd.min() > 0
-    # no interval takes longer than at the slowest admissible speed (2 h / delta at rest ends)
-    assert np.diff(pr.times).max() <= 2 * h.max() / delta * (1 + 1e-9)
+    # no interval takes longer than at the slowest admissible speed: h / delta inside, at a
+    # rest end 3 h / delta (constant-jerk start, issue 28) or 2 h / delta (constant theta_ddot)
+    limit = h / delta * (1 + 1e-5)
+    cubic = pr.cubic_ends
+    limit[[0, -1]] = [(3.0 if c else 2.0) * h[k] / delta * (1 + 1e-9)
+                      for c, k in zip(cubic, (0, -1))]
+    assert np.all(np.diff(pr.times) <= limit)
     assert abs(ver.duration - pr.duration) <= 1e-9 * pr.duration
 
 
@@ -200,10 +205,16 @@ def _polynomial_map(model) -> FrictionMap:
     return FrictionMap(model.friction.joint_names, tuple(joints), 'polynomial test map')
 
 
-@pytest.mark.parametrize('kwargs', [dict(objective='time'), dict(duration=1.0)])
+@pytest.mark.parametrize('kwargs', [dict(objective='time'), dict(factor=1.05)])
 def test_polynomial_map_time_optimal_and_fast_plans(planner, model, map_dir, kwargs):
-    # defect 8: refused at 711.6 and 700.4 N m against 700 (smooth NLP friction vs the map)
+    # defect 8: refused at 711.6 and 700.4 N m against 700 (smooth NLP friction vs the map);
+    # the fast plan was at 1.0 s, which the jerk limits (issue 28) make shorter than the
+    # time-optimal 1.24 s: now at 1.05 x that map's time-optimal duration
     _polynomial_map(model).save(map_dir / 'poly.yaml')
+    if 'factor' in kwargs:
+        t_min = planner.plan(PlanRequest(friction_map='poly.yaml',
+                                         objective='time')).min_duration
+        kwargs = dict(duration=kwargs['factor'] * t_min)
     res = planner.plan(PlanRequest(friction_map='poly.yaml', **kwargs))
     assert_executable(res)
     assert np.all(res.verification.peak_torque <= model.limits.torque * (1 + 1e-6))
