@@ -601,6 +601,9 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                        'model': energy_model, 'electrical': repr(planner.electrical),
                        'delta': s.min_theta_dot_rad_s, 'margin': s.constraint_margin,
                        'rate': [s.play_rate_hz, s.evaluation_rate_hz],
+                       # the smoothness limits (issue 28) change every front
+                       'smooth': [s.jerk_limits, list(s.joint_jerk_limit_rad_s3),
+                                  s.tcp_jerk_limit_m_s3, list(s.torque_rate_limit_nm_s)],
                        # only when set: the caches of plans at the full limits stay valid
                        **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
                       sort_keys=True, default=str)

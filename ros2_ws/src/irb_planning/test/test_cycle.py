@@ -187,12 +187,16 @@ def test_limit_scaling_reaches_every_plan_request_and_the_cache_key():
     op = spec.motions[0]
     assert plan_request(op, 1.0, 'energy', 'electrical_shared', 30, '',
                         spec.limit_scaling).limit_scaling == 0.9
-    planner = SimpleNamespace(settings=SimpleNamespace(
-        grid_size=30, min_theta_dot_rad_s=0.05, constraint_margin=0.005, play_rate_hz=1e3,
-        evaluation_rate_hz=1e3), electrical='e')
+    from irb_planning.planner import PlannerSettings
+    planner = SimpleNamespace(settings=PlannerSettings(grid_size=30), electrical='e')
     # plans at other limits are other plans; without the key the old caches stay valid
     assert _cache_key(planner, op, spec, 'electrical_shared') != _cache_key(
         planner, op, full, 'electrical_shared')
+    # fronts planned without the smoothness limits (issue 28) are not reused with them
+    loose = SimpleNamespace(settings=PlannerSettings(grid_size=30, jerk_limits=False),
+                            electrical='e')
+    assert _cache_key(planner, op, full, 'electrical_shared') != _cache_key(
+        loose, op, full, 'electrical_shared')
 
 
 def test_unreadable_cycle_files(tmp_path):
