@@ -26,6 +26,8 @@ import threading
 import time
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 EXAMPLE = ('ros2 run irb_planning cycle --cycle $(ros2 pkg prefix irb_planning)/share/'
            'irb_planning/config/cycle_gluing.yaml --out cyc && '
            'ros2 run irb_bringup cycle_run --plan cyc --cycles 3 --out cyc_run')
@@ -386,9 +388,7 @@ def finish(rec: dict) -> dict | None:
 
 
 def main(args=None):
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     a = parse_args(argv)
     from .cycle_exec import CycleRunError, load_plan
     try:

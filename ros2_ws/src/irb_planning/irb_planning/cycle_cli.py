@@ -18,6 +18,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from irb_description.node_help import own_args
+
 EXAMPLE = ('ros2 run irb_planning cycle --cycle $(ros2 pkg prefix irb_planning)/share/'
            'irb_planning/config/cycle_gluing.yaml --out cycle_out')
 
@@ -121,9 +123,7 @@ def write_outputs(plan, out: Path, plots: bool, electrical: str = '') -> dict:
 
 
 def main(args=None):
-    argv = list(sys.argv[1:] if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+    argv = own_args(args)
     a = parse_args(argv)
     from .cycle import CycleError, load_cycle, plan_cycle
     try:

@@ -30,35 +30,9 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import BPoly
 
-from .verify import LIMIT_RTOL, MapFriction, PathCurve
+from .verify import LIMIT_RTOL, DHTable, MapFriction, PathCurve
 
 
-@dataclass(frozen=True)
-class DHTable:
-    """DH parameters (6,) each: a [m], alpha [rad], d [m], theta offset [rad]."""
-
-    a: np.ndarray
-    alpha: np.ndarray
-    d: np.ndarray
-    offset: np.ndarray
-
-    def forward(self, q: np.ndarray) -> np.ndarray:
-        """T_6^0 (M, 4, 4) of joint vectors q (M, 6): A_1 ... A_6, A_i = Rz(theta) Tz(d)
-        Tx(a) Rx(alpha), theta_i = q_i + offset_i."""
-        q = np.atleast_2d(np.asarray(q, float))
-        M = q.shape[0]
-        T = np.broadcast_to(np.eye(4), (M, 4, 4)).copy()
-        for i in range(6):
-            th = q[:, i] + self.offset[i]
-            ct, st = np.cos(th), np.sin(th)
-            ca, sa = np.cos(self.alpha[i]), np.sin(self.alpha[i])
-            A = np.zeros((M, 4, 4))
-            A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, self.a[i] * ct
-            A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, self.a[i] * st
-            A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, self.d[i]
-            A[:, 3, 3] = 1.0
-            T = T @ A
-        return T
 
 
 def rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:

@@ -157,6 +157,37 @@ class PathCurve:
 
 
 @dataclass(frozen=True)
+class DHTable:
+    """DH parameters (6,) each: a [m], alpha [rad], d [m], theta offset [rad]."""
+
+    a: np.ndarray
+    alpha: np.ndarray
+    d: np.ndarray
+    offset: np.ndarray
+
+    def forward(self, q: np.ndarray) -> np.ndarray:
+        """T_6^0 (M, 4, 4) of joint vectors q (M, <= 6 columns; missing joints at 0): the
+        product A_1 ... A_6, A_i = Rz(theta) Tz(d) Tx(a) Rx(alpha), theta_i = q_i + offset_i.
+        The checkers' own kinematics (three-axis `verify`, six-axis `six_axis_check`)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        M = q.shape[0]
+        q6 = np.zeros((M, 6))
+        q6[:, :q.shape[1]] = q          # fewer than six columns: the others at 0
+        T = np.broadcast_to(np.eye(4), (M, 4, 4)).copy()
+        for i in range(6):
+            th = q6[:, i] + self.offset[i]
+            ct, st = np.cos(th), np.sin(th)
+            ca, sa = np.cos(self.alpha[i]), np.sin(self.alpha[i])
+            A = np.zeros((M, 4, 4))
+            A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, self.a[i] * ct
+            A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, self.a[i] * st
+            A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, self.d[i]
+            A[:, 3, 3] = 1.0
+            T = T @ A
+        return T
+
+
+@dataclass(frozen=True)
 class ArmKinematics:
     """DH table (6,) each [m]/[rad], and the limits (3,) checked: lower/upper [rad],
     velocity [rad/s], torque [N m]. Joints 4-6 are at 0 (the simplified model)."""
@@ -172,21 +203,7 @@ class ArmKinematics:
 
     def tcp(self, q: np.ndarray) -> np.ndarray:
         """TCP positions (M, 3) [m] of joint angles q (M, 3): the DH product A1...A6."""
-        M = q.shape[0]
-        q6 = np.zeros((M, 6))
-        q6[:, :q.shape[1]] = q
-        T = np.broadcast_to(np.eye(4), (M, 4, 4)).copy()
-        for i in range(6):
-            th = q6[:, i] + self.offset[i]
-            ct, st = np.cos(th), np.sin(th)
-            ca, sa = np.cos(self.alpha[i]), np.sin(self.alpha[i])
-            A = np.zeros((M, 4, 4))
-            A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 0, 3] = ct, -st * ca, st * sa, self.a[i] * ct
-            A[:, 1, 0], A[:, 1, 1], A[:, 1, 2], A[:, 1, 3] = st, ct * ca, -ct * sa, self.a[i] * st
-            A[:, 2, 1], A[:, 2, 2], A[:, 2, 3] = sa, ca, self.d[i]
-            A[:, 3, 3] = 1.0
-            T = T @ A
-        return T[:, :3, 3]
+        return DHTable(self.a, self.alpha, self.d, self.offset).forward(q)[:, :3, 3]
 
     def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                   positions: bool = False) -> tuple[np.ndarray, ...]:
