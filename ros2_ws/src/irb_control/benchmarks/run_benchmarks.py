@@ -397,7 +397,7 @@ def bench_handover(cycles: int = 4, points: int = 20000, rt_priority: int = 0,
            # stops = pdplus's controller_state entering STOPPED (its own or the drive's)
            'stops': stops, 'run_minutes': round(run_minutes, 3),
            'stops_per_minute': round(stops / run_minutes, 2)
-           if run_minutes == run_minutes and run_minutes > 0 else None,
+           if np.isfinite(run_minutes) and run_minutes > 0 else None,
            'load_average_1_5_15_min_at_start': load_start}
     _write('handover' + (f'_rt{rt_priority}' if rt_priority else ''), out)
     return out

@@ -2,6 +2,7 @@
 spin_until_signal live in irb_description.node_main, shared by every node package)."""
 from __future__ import annotations
 
+import gc
 import os
 import queue
 import sys
@@ -193,8 +194,7 @@ class GcWatch:
     ``worst_s`` and ``count`` (collections over the limit) are kept for statistics."""
 
     def __init__(self, limit_s: float, report):
-        import gc
-        self._gc, self.limit_s, self._report = gc, float(limit_s), report
+        self.limit_s, self._report = float(limit_s), report
         self._t0 = 0.0
         self.worst_s, self.count = 0.0, 0
         gc.callbacks.append(self._cb)
@@ -212,8 +212,8 @@ class GcWatch:
                          f"({info.get('collected')} collected)")
 
     def close(self) -> None:
-        if self._cb in self._gc.callbacks:
-            self._gc.callbacks.remove(self._cb)
+        if self._cb in gc.callbacks:
+            gc.callbacks.remove(self._cb)
 
 
 class LogThread:

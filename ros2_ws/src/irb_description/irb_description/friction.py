@@ -55,6 +55,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .params import yaml_problem
+
 SCHEMA_VERSION = 1
 
 
@@ -311,7 +313,6 @@ def load_friction_map(path: str | Path, joint_names: list[str] | None = None,
     except OSError as exc:
         raise FrictionMapError(f'friction map {path} unreadable: {exc.strerror}') from exc
     except yaml.YAMLError as exc:
-        from irb_description.params import yaml_problem
         raise FrictionMapError(f'friction map {path} is not YAML: {yaml_problem(exc)}') \
             from exc
     if not isinstance(data, dict):

@@ -42,12 +42,17 @@ def urdf_path() -> Path:
     return share_dir() / 'urdf' / URDF_NAME
 
 
+def yaml_where(exc: Exception) -> str:
+    """Where a YAML parse error is (1-based): " at line 3, column 9", or '' without a mark.
+    Alone for messages that must not echo a file's content (irb_planning map_files)."""
+    mark = getattr(exc, 'problem_mark', None)
+    return f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+
+
 def yaml_problem(exc: Exception) -> str:
     """One line for a YAML parse error: what is wrong and where (line and column, 1-based),
     e.g. "mapping values are not allowed here at line 3, column 9"."""
-    problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-    mark = getattr(exc, 'problem_mark', None)
-    return problem + (f' at line {mark.line + 1}, column {mark.column + 1}' if mark else '')
+    return (getattr(exc, 'problem', None) or str(exc).splitlines()[0]) + yaml_where(exc)
 
 
 def _load_yaml(path: Path) -> dict:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import RobotModel, UnreachableError
+from .params import yaml_problem
 
 TWO_PI = 2.0 * np.pi
 PATH_TYPES = ('circle', 'arc', 'line', 'polyline', 'spline')
@@ -723,7 +724,6 @@ def read_path_spec(name):
     except OSError as exc:
         raise ValueError(f'cannot read path file {name}: {exc.strerror}') from None
     except yaml.YAMLError as exc:
-        from irb_description.params import yaml_problem
         raise ValueError(f'path file {name} is not YAML: {yaml_problem(exc)}') from None
 
 

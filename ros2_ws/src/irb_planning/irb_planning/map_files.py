@@ -23,6 +23,7 @@ from pathlib import Path
 
 import yaml
 from irb_description.friction import FrictionMap, FrictionMapError, friction_map_from_dict
+from irb_description.params import yaml_where
 
 from .request import ERROR_FRICTION_MAP, PlanError
 
@@ -144,9 +145,7 @@ def read_map(path: Path, joint_names: list[str]) -> tuple[FrictionMap, dict]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        at = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
-        _fail(f'{where}: not valid YAML{at}')
+        _fail(f'{where}: not valid YAML{yaml_where(exc)}')
     block = data.get('friction_map') if isinstance(data, dict) else None
     if not isinstance(block, dict) or not isinstance(block.get('joints'), dict):
         _fail(f'{where}: no friction_map.joints mapping (see irb_description friction.py)')
