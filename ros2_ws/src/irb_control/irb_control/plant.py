@@ -1,7 +1,9 @@
 """Simulated IRB 1600 plant: forward dynamics, stick-slip friction, delay, sensors, brakes.
 
-Plain class, no ROS imports. Joints 1-3 are actuated, 4-6 locked (the model of
-irb_description). One call of ``Plant.step`` advances one controller period ``period_s``
+Plain class, no ROS imports. The joint count n is the model's: 3 with ``RobotModel`` (joints
+1-3 actuated, 4-6 locked: the thesis's model, today's simulator, hand-unrolled below) or 6 with
+``irb_description.six_axis_model.SixJointModel`` (the whole arm, issue 30: the same equations
+on n-vectors in ``_substep_n``). One call of ``Plant.step`` advances one controller period ``period_s``
 (0.004032 s) in ``substeps`` equal substeps (default 5, h = 0.806 ms) of semi-implicit Euler::
 
     v+ = v + h M(q)^-1 (tau - C(q, v) v - g(q) - F_v v - lambda)
@@ -9,7 +11,7 @@ irb_description). One call of ``Plant.step`` advances one controller period ``pe
 
 The dry-friction torque ``lambda`` (Coulomb + Stribeck) is solved *at the new velocity* in
 every substep (time-stepping stick-slip model, projected Gauss-Seidel on the 3x3 Delassus
-matrix h M^-1): each joint either sticks (v+_i = 0, |lambda_i| <= F(v_i)) or slides with
+matrix h M^-1; n x n): each joint either sticks (v+_i = 0, |lambda_i| <= F(v_i)) or slides with
 lambda_i = sign(v+_i) F(v_i), where F(v) = F_c + (F_s - F_c) exp(-(v / v_s)^2). A joint at rest
 stays at rest until the net torque exceeds the static level F_s, and the model is stable at
 zero speed with no chattering (there is no sign(v) of the old velocity). Viscous friction
@@ -64,7 +66,7 @@ POWER_MODES = ('hold', 'brakes', 'bus_off', 'hibernate')
 
 @dataclass(frozen=True)
 class PlantFriction:
-    """Parametric plant friction per joint, each (3,): F_c, F_s [N m], v_s [rad/s], F_v."""
+    """Parametric plant friction per joint, each (n,): F_c, F_s [N m], v_s [rad/s], F_v."""
 
     coulomb: np.ndarray
     static: np.ndarray
@@ -80,12 +82,12 @@ class PlantFriction:
                    np.array([j.viscous for j in fm.joints]))
 
     def slip_level(self, v: np.ndarray) -> np.ndarray:
-        """Dry-friction magnitude F(v) = F_c + (F_s - F_c) exp(-(v/v_s)^2) [N m], v (3,)."""
+        """Dry-friction magnitude F(v) = F_c + (F_s - F_c) exp(-(v/v_s)^2) [N m], v (n,)."""
         return self.coulomb + (self.static - self.coulomb) * np.exp(
             -(np.asarray(v) / self.stribeck_velocity) ** 2)
 
     def steady_torque(self, v: np.ndarray) -> np.ndarray:
-        """Friction torque at constant nonzero speed v (3,) [rad/s]: sign(v) F(v) + F_v v."""
+        """Friction torque at constant nonzero speed v (n,) [rad/s]: sign(v) F(v) + F_v v."""
         v = np.asarray(v, float)
         return np.sign(v) * self.slip_level(v) + self.viscous * v
 
@@ -98,9 +100,10 @@ def load_plant_friction(path: str | Path, joint_names: list[str]) -> tuple[Frict
     return fm, PlantFriction.from_map(fm)
 
 
-def load_plant_brakes(path: str | Path | None) -> dict:
+def load_plant_brakes(path: str | Path | None, joints: int = 3) -> dict:
     """The ``brakes:`` section of a plant YAML as PlantConfig fields
-    (``brake_torque_nm``, ``brake_release_s``); {} when the file has none (ideal brakes)."""
+    (``brake_torque_nm``, ``brake_release_s``); {} when the file has none (ideal brakes).
+    ``joints`` 6: ``torque_nm`` (joints 1-3) followed by ``wrist_torque_nm`` (joints 4-6)."""
     if not path:
         return {}
     data = yaml.safe_load(Path(path).read_text())
@@ -109,9 +112,12 @@ def load_plant_brakes(path: str | Path | None) -> dict:
         return {}
     try:
         torque = tuple(float(x) for x in b['torque_nm'])
+        if joints == 6:
+            torque += tuple(float(x) for x in b['wrist_torque_nm'])
         release = float(b.get('release_s', 0.0))
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f'{path}: brakes needs torque_nm (3 numbers) and release_s: '
+        raise ValueError(f'{path}: brakes needs torque_nm (3 numbers), release_s'
+                         f'{" and wrist_torque_nm (3 numbers)" if joints == 6 else ""}: '
                          f'{exc}') from None
     return {'brake_torque_nm': torque, 'brake_release_s': release}
 
@@ -132,7 +138,8 @@ def config_path(name: str) -> Path:
 
 @dataclass(frozen=True)
 class PlantConfig:
-    """Plant settings (SI units). Arrays are (3,) over joints 1-3."""
+    """Plant settings (SI units). Arrays are (n,) over the model's joints (initial_q's
+    default is the thesis's three-axis pose: six joints need their own)."""
 
     period_s: float = PERIOD_S
     substeps: int = 5
@@ -159,15 +166,15 @@ class PlantConfig:
             raise ValueError(f'plant settings must be finite and >= 0: {self}')
         if self.brake_torque_nm is not None:
             b = np.asarray(self.brake_torque_nm, float)
-            if b.shape != (3,) or not np.all(np.isfinite(b)) or np.any(b <= 0):
-                raise ValueError(f'brake_torque_nm must be 3 finite numbers > 0, got {b}')
+            if b.ndim != 1 or not np.all(np.isfinite(b)) or np.any(b <= 0):
+                raise ValueError(f'brake_torque_nm must be finite numbers > 0, got {b}')
         if not (math.isfinite(self.brake_release_s) and self.brake_release_s >= 0):
             raise ValueError(f'brake_release_s must be >= 0, got {self.brake_release_s}')
 
 
 @dataclass
 class Measurement:
-    """One encoder sample: time t [s], q (3,) [rad], qd (3,) [rad/s], applied torque (3,)."""
+    """One encoder sample: time t [s], q (n,) [rad], qd (n,) [rad/s], applied torque (n,)."""
 
     t: float
     q: np.ndarray
@@ -177,7 +184,7 @@ class Measurement:
 
 @dataclass
 class PlantState:
-    """True state: t [s], q (3,) [rad], qd (3,) [rad/s], energy [J] = int sum |tau qd| dt."""
+    """True state: t [s], q (n,) [rad], qd (n,) [rad/s], energy [J] = int sum |tau qd| dt."""
 
     t: float = 0.0
     q: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -192,7 +199,17 @@ class Plant:
                  = PlantConfig(), effects: PlantEffects | None = None):
         self.model = model.copy()
         self._pm = self.model.model
+        self.n = n = int(self._pm.nq)          # joints: 3 (thesis) or 6 (the whole arm)
         self.effects = effects or PlantEffects()
+        if n != 3 and self.effects:
+            raise ValueError(f'plant effects are modelled for the three-axis plant only, not '
+                             f'{n} joints')
+        for name, v in (('friction', friction.coulomb), ('initial_q', config.initial_q),
+                        ('brake_torque_nm', config.brake_torque_nm)):
+            if v is not None and len(v) != n:
+                raise ValueError(f'{name} has {len(v)} joints, the model {n}')
+        if n != 3:      # the n-joint substep (the three-joint one is unrolled for speed)
+            self._substep = self._substep_n
         self._fx = (EffectsRuntime(self.effects, friction.stribeck_velocity, config.period_s,
                                    config.substeps) if self.effects else None)
         if self._fx is not None:
@@ -206,23 +223,28 @@ class Plant:
         self._fs = [float(x) for x in friction.static]
         self._vs = [float(x) for x in friction.stribeck_velocity]
         self._fv = [float(x) for x in friction.viscous]
-        self._dfs = [self._fs[i] - self._fc[i] for i in range(3)]     # F_s - F_c
+        self._dfs = [self._fs[i] - self._fc[i] for i in range(n)]     # F_s - F_c
+        # the same as arrays, for the n-joint substep
+        self._fc_a, self._vs_a, self._fv_a = (np.asarray(x, float) for x in (
+            self._fc, self._vs, self._fv))
+        self._dfs_a = np.asarray(self._dfs, float)
         self.events: list[tuple[float, str]] = []
         self.camera: list[tuple[float, np.ndarray]] = []
         self.reset(np.asarray(config.initial_q, float))
 
     # --- state ---------------------------------------------------------------------------
     def reset(self, q: np.ndarray, qd: np.ndarray | None = None, t: float = 0.0) -> None:
-        """Put the robot at q (3,) [rad] with speed qd (default 0), brakes on, no commands."""
+        """Put the robot at q (n,) [rad] with speed qd (default 0), brakes on, no commands."""
+        n = self.n
         self.state = PlantState(float(t), np.array(q, float),
-                                np.zeros(3) if qd is None else np.array(qd, float), 0.0)
+                                np.zeros(n) if qd is None else np.array(qd, float), 0.0)
         self.rng = np.random.default_rng(self.config.seed)
-        self._noise = np.empty((0, 3))
+        self._noise = np.empty((0, n))
         self._noise_i = 0
         self._pipeline: deque = deque([None] * self.config.delay_samples)
         self._latest: np.ndarray | None = None
         self._last_command_t = -math.inf
-        self.applied = np.zeros(3)
+        self.applied = np.zeros(n)
         self.braked = True
         self.power_mode = 'brakes'   # settled power mode of the drives (POWER_MODES)
         self.mode_target: str | None = None     # a change under way: target ...
@@ -235,8 +257,8 @@ class Plant:
         self._slow_release = True
         self.rejected_mode = 0       # commands ignored because the motors were off
         self.error = ''              # latched fault ('' = none): commands ignored until cleared
-        self.friction_torque = np.zeros(3)
-        self._tau_t = [0.0, 0.0, 0.0]
+        self.friction_torque = np.zeros(n)
+        self._tau_t = [0.0] * n
         if self.effects:
             self._fx = EffectsRuntime(self.effects, self.friction.stribeck_velocity,
                                       self.config.period_s, self.config.substeps)
@@ -275,7 +297,7 @@ class Plant:
             self._release_t = None
             self._latest = None
             self._pipeline = deque([None] * self.config.delay_samples)
-            self.applied = np.zeros(3)
+            self.applied = np.zeros(self.n)
             self._auto_hold = False
         self.mode_target = mode
         self._mode_done_t = t + max(float(duration_s), 0.0)
@@ -300,12 +322,12 @@ class Plant:
                 self._auto_hold = True
 
     def command(self, tau: np.ndarray) -> None:
-        """Hand over the torque command (3,) [N m] answering the latest measurement.
+        """Hand over the torque command (n,) [N m] answering the latest measurement.
 
         Non-finite or wrongly shaped commands are ignored (as a drive would reject them).
         """
         tau = np.asarray(tau, float)
-        if tau.shape != (3,) or not all(map(math.isfinite, tau.tolist())):
+        if tau.shape != (self.n,) or not all(map(math.isfinite, tau.tolist())):
             self.events.append((self.state.t, f'rejected invalid command {tau!r}'))
             return
         if self.error:
@@ -325,7 +347,7 @@ class Plant:
     # --- sensors -------------------------------------------------------------------------
     def _gauss(self) -> np.ndarray:
         if self._noise_i >= len(self._noise):
-            self._noise = self.rng.standard_normal((4096, 3))
+            self._noise = self.rng.standard_normal((4096, self.n))
             self._noise_i = 0
         self._noise_i += 1
         return self._noise[self._noise_i - 1]
@@ -337,6 +359,8 @@ class Plant:
         # element-wise in floats (the same IEEE operations as on the arrays; round() is
         # round-half-even like np.round)
         pn, res, vn = c.position_noise_rad, c.encoder_resolution_rad, c.velocity_noise_rad_s
+        if self.n != 3:
+            return self._measure_n(pn, res, vn)
         n0, n1, n2 = self._gauss().tolist()
         q0, q1, q2 = s.q.tolist()
         q = [q0 + pn * n0, q1 + pn * n1, q2 + pn * n2]
@@ -346,6 +370,18 @@ class Plant:
         v0, v1, v2 = s.qd.tolist()
         return Measurement(s.t, np.array(q), np.array((v0 + vn * n0, v1 + vn * n1,
                                                        v2 + vn * n2)), self.applied.copy())
+
+    def _measure_n(self, pn: float, res: float, vn: float) -> Measurement:
+        """``measure`` on n joints (the same operations per joint)."""
+        s = self.state
+        nz = self._gauss().tolist()
+        q = [x + pn * e for x, e in zip(s.q.tolist(), nz)]
+        if res > 0:
+            q = [round(x / res) * res if math.isfinite(x) else x / res * res for x in q]
+        nz = self._gauss().tolist()
+        return Measurement(s.t, np.array(q), np.array([x + vn * e for x, e in
+                                                       zip(s.qd.tolist(), nz)]),
+                           self.applied.copy())
 
     def take_camera(self) -> list[tuple[float, np.ndarray]]:
         """Camera samples (t [s], TCP (3,) [m]) taken since the last call."""
@@ -375,7 +411,7 @@ class Plant:
             if not self.braked:
                 self.braked = True
             self._release_t = None
-            self.applied = np.zeros(3)
+            self.applied = np.zeros(self.n)
         else:
             if self.braked:
                 if self._release_t is None:      # torque on the closed brake from now on
@@ -506,15 +542,78 @@ class Plant:
         s.energy += h * (abs(t0 * n0) + abs(t1 * n1) + abs(t2 * n2))
         s.t += h
 
+    def _substep_n(self, tau: list) -> None:
+        """``_substep`` on n joints (the six-joint arm): the same equations on n-vectors,
+        numpy's products for W r and W lambda (so not the same bits as the unrolled
+        three-joint substep; equal to ~1e-12, tested), the dry friction by
+        ``_solve_dry_friction_n``."""
+        s = self.state
+        h = self._h
+        n = self.n
+        brake = self.config.brake_torque_nm if self.braked else None
+        if self.braked and brake is None:       # an ideal brake: holds any torque
+            s.qd = np.zeros(n)
+            self.friction_torque = np.zeros(n)
+            s.t += h
+            return
+        q, v = s.q, s.qd
+        W = h * pin.computeMinverse(self._pm, self._pd, q)   # h M^-1 (Delassus matrix)
+        tau_a = np.asarray(tau, float)
+        r = tau_a - pin.nonLinearEffects(self._pm, self._pd, q, v) - self._fv_a * v
+        vf = v + W @ r
+        bd = self._fc_a + self._dfs_a * np.exp(-(v / self._vs_a) ** 2)
+        if brake is not None:      # an engaged brake: one more dry-friction element
+            bd = bd + np.asarray(brake, float)
+        lam = self._solve_dry_friction_n(W, vf, bd)
+        vn = vf - W @ lam
+        vn[np.abs(vn) < 1e-12] = 0.0      # sticking joints: exactly zero
+        s.q = q + h * vn
+        s.qd = vn
+        self._lam = lam.tolist()
+        self._vprev = v.tolist()
+        s.energy += h * float(np.sum(np.abs(tau_a * vn)))
+        s.t += h
+
+    def _solve_dry_friction_n(self, W: np.ndarray, vf: np.ndarray, bound: np.ndarray
+                              ) -> np.ndarray:
+        """``_solve_dry_friction`` on n joints with numpy: lambda (n,) [N m] with
+        v+ = vf - W lambda, per joint stick (v+_i = 0, |lambda_i| <= bound_i) or slide
+        (lambda_i = sign(v+_i) bound_i); the same active-set iteration, then projected
+        Gauss-Seidel as the fallback."""
+        n = self.n
+        diag = np.diag(W)
+        sign = np.where(np.abs(vf) <= diag * bound, 0.0, np.sign(vf))
+        for _ in range(2 * n):
+            lam = sign * bound
+            stick = sign == 0.0
+            if np.any(stick):
+                slide = ~stick
+                rhs = vf[stick] - W[np.ix_(stick, slide)] @ lam[slide]
+                lam[stick] = np.linalg.solve(W[np.ix_(stick, stick)], rhs)
+            v = vf - W @ lam
+            flip_out = stick & (np.abs(lam) > bound * (1.0 + 1e-12))
+            flip_in = ~stick & (v * sign < 0.0)
+            if not (np.any(flip_out) or np.any(flip_in)):
+                return lam
+            sign = np.where(flip_out, np.sign(lam), np.where(flip_in, 0.0, sign))
+        lam = np.zeros(n)
+        for _ in range(self.config.gs_iterations):
+            for i in range(n):
+                vi0 = vf[i] - W[i] @ lam + W[i, i] * lam[i]
+                lam[i] = (vi0 / W[i, i] if abs(vi0) <= W[i, i] * bound[i]
+                          else math.copysign(bound[i], vi0))
+        return lam
+
     @property
     def friction_torque(self) -> np.ndarray:
-        """Friction torque (3,) [N m] of the last substep (dry + viscous)."""
-        return np.array([self._lam[i] + self._fv[i] * self._vprev[i] for i in range(3)])
+        """Friction torque (n,) [N m] of the last substep (dry + viscous)."""
+        return np.array([self._lam[i] + self._fv[i] * self._vprev[i]
+                         for i in range(len(self._lam))])
 
     @friction_torque.setter
     def friction_torque(self, value) -> None:
         self._lam = list(np.asarray(value, float))
-        self._vprev = [0.0, 0.0, 0.0]
+        self._vprev = [0.0] * len(self._lam)
 
     def _solve_dry_friction(self, W: list, vf: list, bound: list) -> list:
         """Dry-friction torques lambda (3,) [N m] with v+ = vf - W lambda (W = h M^-1).
