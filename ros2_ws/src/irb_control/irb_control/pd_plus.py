@@ -1,7 +1,9 @@
 """theta-driven inverse-dynamics PD+ controller with friction compensation (thesis §4.3, §6.4).
 
 Plain class, numpy in/out, no ROS imports. Per step (period T = 0.004032 s), from the measured
-q, qd (3,) at time t [s]:
+q, qd (n,) at time t [s] (n = the model's joints: 3 for the thesis's ``RobotModel``, the
+hand-unrolled ``step``; 6 for ``irb_description.six_axis_model.SixJointModel``, ``_step_n``,
+the same operations on n-vectors -- on three joints equal to ``step`` to the bit, tested):
 
 1. theta = atan2 of FK(q) about the path centre (unwrapped, clamped to the profile), predicted
    ``prediction_samples`` (n = 3) samples ahead by integrating theta_dot = h(theta) (Euler, T).
@@ -179,7 +181,7 @@ def _halt_rate(halt: tuple, r: float) -> tuple:
 def _scaled(q, qd, qdd, k: float, k_dot: float) -> tuple:
     """References along the same curve run at the rate k: qd k, qdd k^2 + qd dk/dt."""
     return (q, [x * k for x in qd],
-            [qdd[i] * k * k + qd[i] * k_dot for i in range(3)])
+            [qdd[i] * k * k + qd[i] * k_dot for i in range(len(qd))])
 
 
 def ramp_duration(q0: np.ndarray, q1: np.ndarray, velocity_limit: np.ndarray,
@@ -192,7 +194,8 @@ def ramp_duration(q0: np.ndarray, q1: np.ndarray, velocity_limit: np.ndarray,
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """PD+ settings; arrays (3,) per joint, SI units. ``None`` limits come from the model."""
+    """PD+ settings; arrays (n,) per joint (n = the model's joints; the defaults are the three
+    axes'), SI units. ``None`` limits come from the model."""
 
     kp: tuple = (14000.0, 9000.0, 2500.0)         # [N m/rad]
     kd: tuple = (800.0, 500.0, 140.0)             # [N m s/rad]
@@ -218,15 +221,21 @@ class ControllerConfig:
     #: 'auto' = 'reference' on the thesis's CirclePath, 'commanded' on every other path
     delay_prediction: str = 'auto'
 
+    @property
+    def joints(self) -> int:
+        """The joint count of the per-joint arrays (the model must have as many)."""
+        return len(self.kp)
+
     def __post_init__(self):
+        n = len(np.atleast_1d(self.kp))
         for name in ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad'):
             v = np.asarray(getattr(self, name), float)
-            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0):
-                raise ValueError(f'{name} must be 3 finite numbers >= 0, got {v}')
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'{name} must be {n} finite numbers >= 0, got {v}')
         if self.torque_limit_nm is not None:
             v = np.asarray(self.torque_limit_nm, float)
-            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
-                raise ValueError('torque_limit_nm must be 3 finite numbers > 0')
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError(f'torque_limit_nm must be {n} finite numbers > 0')
         if self.delay_prediction not in DELAY_PREDICTIONS:
             raise ValueError(f'delay_prediction must be one of {DELAY_PREDICTIONS}, got '
                              f'{self.delay_prediction!r}')
@@ -266,7 +275,7 @@ def _parametric_friction(friction: FrictionMap | None) -> list | None:
     """Per joint (F_c+, F_c-, hump+, hump-, v_s, F_v, tau_0) when every joint of ``friction``
     is purely parametric (JointFriction.parametric), else None (FrictionMap.torque is used).
     F_c+- = F_c, humps F_s - F_c and tau_0 = 0 for maps without asymmetry and offset."""
-    if friction is None or len(friction.joints) != 3:
+    if friction is None:
         return None
     out = []
     for j in friction.joints:
@@ -335,6 +344,13 @@ class PdPlusController:
                  ControllerConfig(), friction: FrictionMap | None = None):
         self.model = model.copy()
         self._pm, self._pd = self.model.model, self.model.data
+        self.n = n = int(self._pm.nq)          # joints: 3 (thesis) or 6 (the whole arm)
+        if config.joints != n:
+            raise ValueError(f'the controller settings have {config.joints} joints, the model '
+                             f'{n}')
+        if friction is not None and len(friction.joints) != n:
+            raise ValueError(f'the friction map has {len(friction.joints)} joints, the model '
+                             f'{n}')
         self.path = path
         self.config = config
         self.friction = friction
@@ -364,12 +380,12 @@ class PdPlusController:
         self._prev_tau: np.ndarray | None = None
         self._halt_T: float | None = None     # hold requested: stop duration T_s [s] ...
         self._halt: tuple | None = None       # ... then (r_s, T_s, v_s) from the next step
-        self._last_qd_ref = [0.0, 0.0, 0.0]   # the last command's reference speed
+        self._last_qd_ref = [0.0] * n         # the last command's reference speed
         self._theta = 0.0
         self._theta_v = 0.0
         self._t0 = 0.0
-        self._ramp_from = np.zeros(3)
-        self._ramp_to = np.zeros(3)
+        self._ramp_from = np.zeros(n)
+        self._ramp_to = np.zeros(n)
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
         self.base_path = path            # the configured path: plans that carry none
@@ -550,6 +566,8 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
+        if self.n != 3:
+            return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
         if q.shape != (3,) or qd.shape != (3,) or not math.isfinite(t):
@@ -733,14 +751,206 @@ class PdPlusController:
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
 
+    def _nan_fields(self) -> dict:
+        """ControlOutput's NaN reference fields for n joints ({} for 3: the defaults)."""
+        if self.n == 3:
+            return {}
+        n = self.n
+        return {k: np.full(n, np.nan) for k in ('q_ref', 'qd_ref', 'qdd_ref', 'q_error',
+                                                  'qd_error', 'tau_model', 'tau_friction',
+                                                  'tau_feedback')}
+
+    def _step_n(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
+        """``step`` on n joints (the six-joint arm): the same operations, in the same order,
+        on n-lists instead of unrolled floats (on three joints the same result to the bit as
+        ``step``, tested); every change to ``step`` belongs here too."""
+        n = self.n
+        R = range(n)
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        if q.shape != (n,) or qd.shape != (n,) or not math.isfinite(t):
+            return self._rejected()
+        ql = q.tolist()
+        wl = qd.tolist()
+        isfinite = math.isfinite
+        if not (all(map(isfinite, ql)) and all(map(isfinite, wl))):
+            return self._rejected()
+        nan = self._nan_fields()
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, **nan)
+        # safety on the measurement
+        vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
+        if any(abs(wl[i]) > vm[i] for i in R):
+            self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
+        elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
+            self.stop(f'position limit: q = {q.round(4).tolist()} rad')
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, **nan)
+        prof = self.active          # the running reference: offered plans wait in pending
+        if self.mode == MODE_IDLE:
+            if not self._enable_requested or prof is None:
+                return ControlOutput(False, np.zeros(n), self.mode, **nan)
+            self._enable_requested = False
+            self._ramp_from = q.copy()
+            self._ramp_to = prof.q[0].copy()
+            self._ramp_T = ramp_duration(q, self._ramp_to, self.model.limits.velocity,
+                                         self.config.ramp_min_duration_s,
+                                         self.config.ramp_speed_fraction)
+            self._t0 = t
+            self.mode = MODE_RAMP
+            self._prev_tau = None
+
+        theta = theta_p = theta_dot_ref = math.nan
+        d = self.delta
+        tp = t + d
+        time_driven = isinstance(prof, TimeTrajectory)
+        halt = None     # a controlled stop (hold): (r_s, T_s, v_s), from the step after hold()
+        if self._halt_T is not None or self._halt is not None:
+            if self.mode not in MOVING:             # the motion ended by itself meanwhile
+                self._halt_T = self._halt = None
+            else:
+                if self._halt is None:              # starts at this step's reference time
+                    self._halt = (tp, self._halt_T, tp - self._t0)
+                    self._halt_T = None
+                halt = self._halt
+        if self.mode == MODE_RAMP and halt is None and tp - self._t0 >= self._ramp_T:
+            self.mode = self._transition(EV_RAMP_DONE)[0]
+            self._t0 = self._t0 + self._ramp_T     # time origin of the profile
+            self._theta = prof.theta_start if not time_driven else 0.0
+            self._theta_v = self._theta
+        if halt is not None:     # progress rate k (1 -> 0), its rate, the virtual time at tp
+            k, k_dot, v_tp, u = _halt_rate(halt, tp)
+        zero = [0.0] * n
+        if self.mode == MODE_RAMP:
+            q_ref, qd_ref, qdd_ref = (x.tolist() for x in quintic_ramp(
+                self._ramp_from, self._ramp_to, self._ramp_T,
+                tp - self._t0 if halt is None else v_tp))
+            if halt is not None:
+                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
+        elif self.mode == MODE_TIME:
+            tau = tp - self._t0 if halt is None else v_tp
+            row = prof.sample_list(tau)
+            q_ref, qd_ref, qdd_ref = row[0:n], row[n:2 * n], row[2 * n:3 * n]
+            if halt is not None:
+                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
+            if tau >= prof.duration:
+                self.mode = self._transition(EV_MOTION_DONE)[0]
+                self._hold = prof.q[-1].tolist()
+        elif self.mode == MODE_HOLD and (time_driven or prof is None):
+            q_ref, qd_ref, qdd_ref = self._hold, zero, zero
+        else:   # PATH or HOLD on a theta-profile
+            raw = self._theta_of(q)
+            # unwrap against the previous theta, clamp to the profile
+            dth = (raw - self._theta + math.pi) % (2 * math.pi) - math.pi
+            theta = min(max(self._theta + dth, prof.theta_start), prof.theta_end)
+            self._theta = theta
+            T = self.config.period_s
+            # progress governor (see ``step``)
+            if halt is None:
+                tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
+            else:        # a controlled stop: theta_v and the prediction advance at k h
+                tv = min(self._theta_v + T * _halt_rate(halt, t)[0] * prof.h(self._theta_v),
+                         prof.theta_end)
+            tv = min(max(tv, theta), theta + self.config.theta_max_lead_rad)
+            self._theta_v = tv
+            th = tv
+            for j in range(self.config.prediction_samples):
+                kj = 1.0 if halt is None else _halt_rate(halt, t + (j + 1) * T)[0]
+                th = min(th + T * kj * prof.h(th), prof.theta_end)
+            theta_p = th
+            if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
+                if self.mode != MODE_HOLD:
+                    self.mode = self._transition(EV_MOTION_DONE)[0]
+                    self._hold = prof.q[-1].tolist()
+                q_ref, qd_ref, qdd_ref = self._hold, zero, zero
+                theta_dot_ref = 0.0
+            else:
+                row = prof.sample_list(th)
+                theta_dot_ref = row[0]
+                q_ref, qd_ref, qdd_ref = row[2:2 + n], row[2 + n:2 + 2 * n], \
+                    row[2 + 2 * n:2 + 3 * n]
+                if halt is not None:
+                    theta_dot_ref *= k
+                    q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
+        if halt is not None and u >= 1.0 and self.mode in MOVING:
+            # the reference has come to rest on its own path: hold that pose, motors on
+            self.mode = MODE_HOLD
+            self._hold = list(q_ref)
+            self._halt = None
+            q_ref, qd_ref, qdd_ref = self._hold, zero, zero
+
+        # delay compensation of the measurement (see ``step``)
+        fl = self._in_flight
+        if self._commanded and len(fl) == self.config.prediction_samples:
+            T = self.config.period_s
+            sv = [0.0] * n
+            sp = [0.0] * n
+            for wj, b in zip(self._w_pos, fl):
+                sv = [sv[i] + b[i] for i in R]
+                sp = [sp[i] + wj * b[i] for i in R]
+            p = [ql[i] + d * wl[i] + sp[i] for i in R]
+            uu = [wl[i] + T * sv[i] for i in R]
+        else:
+            c2 = 0.5 * d * d
+            p = [ql[i] + d * wl[i] + c2 * qdd_ref[i] for i in R]
+            uu = [wl[i] + d * qdd_ref[i] for i in R]
+        e = [q_ref[i] - p[i] for i in R]
+        de = [qd_ref[i] - uu[i] for i in R]
+        em = self.e_max.tolist()
+        if any(abs(e[i]) > em[i] for i in R):
+            self.stop(f'tracking error {np.abs(np.array(e)).round(4).tolist()} rad > '
+                      f'{self.e_max.tolist()}')
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
+                                 theta_p, theta_dot_ref, **nan)
+        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g
+        q_p = np.array(p)
+        pm, pd = self._pm, self._pd
+        Mu = pin.crba(pm, pd, q_p)
+        # symmetric M from the upper triangle pinocchio fills
+        M = np.triu(Mu) + np.triu(Mu, 1).T
+        qd_ref_a = np.array(qd_ref)
+        qdd_ref_a = np.array(qdd_ref)
+        Ma = (M @ qdd_ref_a).tolist()
+        Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ qd_ref_a).tolist()
+        g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
+        tm = [Ma[i] + Cb[i] + g[i] for i in R]
+        if self.friction is not None:
+            tf = self._friction_torque_n(qd_ref, uu)
+        else:
+            tf = zero
+        kp, kd = self.kp.tolist(), self.kd.tolist()
+        fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
+        tau = [tm[i] + tf[i] + fb[i] for i in R]
+        if not all(map(isfinite, tau)):
+            self.stop('non-finite torque computed')
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
+                                 theta_p, theta_dot_ref, **nan)
+        # rate limit around the previous command, then the torque limit
+        prev = self._prev_tau.tolist() if self._prev_tau is not None else None
+        r, tmax = self.rate_max.tolist(), self.tau_max.tolist()
+        for i in R:
+            x = tau[i]
+            if prev is not None:
+                x = min(max(x, prev[i] - r[i]), prev[i] + r[i])
+            tau[i] = min(max(x, -tmax[i]), tmax[i])
+        tau_a = np.array(tau)
+        self._prev_tau = tau_a
+        self._last_qd_ref = qd_ref
+        if self._commanded:
+            fl.append(tuple(qdd_ref))
+        return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
+                             np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
+                             np.array(tm), np.array(tf), np.array(fb))
+
     def _rejected(self) -> ControlOutput:
         self.rejected_inputs += 1
         # no command for this sample: the drive keeps acting on the last one, so it is in
         # flight once more (as the plant's delay line repeats it)
         if self._commanded and self._in_flight:
             self._in_flight.append(self._in_flight[-1])
-        return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason,
-                             rejected_input=True)
+        n = self.n
+        return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
+                             rejected_input=True, **self._nan_fields())
 
     def _theta_of(self, q: np.ndarray) -> float:
         """theta of FK(q): for the thesis's CirclePath atan2 about the centre
@@ -756,6 +966,26 @@ class PdPlusController:
         ang = float(np.arctan2(y - cy, x - cx))
         theta = (direction * (ang - start)) % self._two_pi
         return 0.0 if theta >= self._two_pi else theta
+
+    def _friction_torque_n(self, qd_ref: list, qd_p) -> list:
+        """``_friction_torque`` on n joints (the same operations per joint)."""
+        n = self.n
+        a = self.config.friction_blend_a
+        alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
+        v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
+        par = self._friction_par
+        if par is None:
+            return self.friction.torque(np.array(v)).tolist()
+        out = []
+        exp = np.exp
+        for i in range(n):
+            fcp, fcn, hp, hn, vs, fv, off = par[i]
+            x = v[i]
+            e = float(exp(-((x / vs) ** 2)))
+            sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
+            tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
+            out.append(tf + off if off else tf)
+        return out
 
     def _friction_torque(self, qd_ref: list, qd_p: tuple) -> list:
         """tau_f(v), v = friction_blend(qd_ref, qd_p, a) (eq. 4.9-4.10), as 3 floats.

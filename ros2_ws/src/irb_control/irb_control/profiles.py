@@ -53,9 +53,11 @@ class PathProfile:
         for name in ('theta_dot', 'theta_ddot'):
             if np.shape(getattr(self, name)) != (n,):
                 raise ProfileError(f'{name} must have shape ({n},)')
-        for name in ('q', 'qd', 'qdd'):
-            if np.shape(getattr(self, name)) != (n, 3):
-                raise ProfileError(f'{name} must have shape ({n}, 3)')
+        joints = np.shape(self.q)[1] if np.ndim(self.q) == 2 else 3
+        for name in ('q', 'qd', 'qdd'):      # (n, 3), or (n, 6) for the six-joint arm
+            if np.shape(getattr(self, name)) != (n, joints) or joints not in (3, 6):
+                raise ProfileError(f'{name} must have shape ({n}, 3) or ({n}, 6), the same '
+                                   'for q, qd and qdd')
         _check_finite('theta-profile', self.theta, self.theta_dot, self.theta_ddot, self.q,
                       self.qd, self.qdd)
         if np.any(np.diff(self.theta) <= 0):
@@ -138,9 +140,11 @@ class TimeTrajectory:
         n = len(self.t)
         if n < 2:
             raise ProfileError('a trajectory needs at least 2 points')
-        for name in ('q', 'qd', 'qdd'):
-            if np.shape(getattr(self, name)) != (n, 3):
-                raise ProfileError(f'{name} must have shape ({n}, 3)')
+        joints = np.shape(self.q)[1] if np.ndim(self.q) == 2 else 3
+        for name in ('q', 'qd', 'qdd'):      # (n, 3), or (n, 6) for the six-joint arm
+            if np.shape(getattr(self, name)) != (n, joints) or joints not in (3, 6):
+                raise ProfileError(f'{name} must have shape ({n}, 3) or ({n}, 6), the same '
+                                   'for q, qd and qdd')
         _check_finite('trajectory', self.t, self.q, self.qd, self.qdd)
         if np.any(np.diff(self.t) <= 0):
             raise ProfileError('trajectory time must be strictly increasing')
