@@ -6,7 +6,9 @@
     res.path_error_camera()      # (M,) [m]
 
 Each period: measure -> controller step -> command -> plant step, the same order and delay as
-the two ROS nodes in lockstep mode.
+the two ROS nodes in lockstep mode. The joint count is the plant's: 3 (``build_default``, the
+thesis) or 6 (``build_six_joint``: ``SixJointModel``, config/pdplus_six_axis.yaml, the six
+joints of config/plant.yaml).
 """
 from __future__ import annotations
 
@@ -27,9 +29,9 @@ from .profiles import default_circle_profile
 class ClosedLoopResult:
     """Logged arrays of one run; N controller periods, M camera samples, SI units.
 
-    t (N,) [s]; q, qd (N, 3) true state at t; q_meas, qd_meas (N, 3) encoder samples;
-    tau_cmd (N, 3) command computed at t (0 when none); tau_applied (N, 3) torque acting over
-    [t, t + T); q_ref, qd_ref (N, 3) (NaN where undefined); theta (N,); mode (N,) int;
+    t (N,) [s]; q, qd (N, n) true state at t (n joints: 3 or 6); q_meas, qd_meas (N, n) encoder
+    samples; tau_cmd (N, n) command computed at t (0 when none); tau_applied (N, n) torque
+    acting over [t, t + T); q_ref, qd_ref (N, n) (NaN where undefined); theta (N,); mode (N,) int;
     published (N,) bool; cam_t (M,) [s], cam_p (M, 3) [m]; energy [J] = int sum |tau qd| dt
     over the run (from the plant's substeps); events: plant log lines; stop_reason.
     """
@@ -71,7 +73,7 @@ class ClosedLoopResult:
         return (self.mode == 2) | (self.mode == 3)
 
     def joint_error(self) -> np.ndarray:
-        """Joint tracking error (N, 3) [rad]: the reference computed at t_k (which is for
+        """Joint tracking error (N, n) [rad]: the reference computed at t_k (which is for
         t_k + n T, n = prediction_samples) minus the true q at t_{k+n}; NaN where undefined."""
         n = self.prediction_samples
         e = np.full_like(self.q, np.nan)
@@ -127,7 +129,7 @@ def simulate_closed_loop(plant: Plant, controller: PdPlusController, duration: f
     """
     n = int(round(duration / plant.config.period_s))
     t = np.empty(n)
-    arr = {k: np.full((n, 3), np.nan) for k in ('q', 'qd', 'q_meas', 'qd_meas', 'tau_cmd',
+    arr = {k: np.full((n, plant.n), np.nan) for k in ('q', 'qd', 'q_meas', 'qd_meas', 'tau_cmd',
                                                 'tau_applied', 'q_ref', 'qd_ref')}
     theta = np.full(n, np.nan)
     mode = np.zeros(n, int)
@@ -209,4 +211,42 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
     ctrl = PdPlusController(model, path, controller_config,
                             controller_friction(model, friction_mode, friction_file))
     ctrl.set_path_profile(default_circle_profile(model, path, duration_s))
+    return plant, ctrl
+
+
+def six_axis_controller_config(path: str | Path | None = None, **overrides) -> ControllerConfig:
+    """ControllerConfig of six joints: the per-joint settings of config/pdplus_six_axis.yaml
+    (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad), the
+    rest ControllerConfig's defaults (= config/pdplus.yaml), then ``overrides``."""
+    import yaml
+
+    from .plant import config_path
+    p = Path(path) if path else config_path('pdplus_six_axis.yaml')
+    block = yaml.safe_load(p.read_text())['pdplus']['ros__parameters']
+    keys = ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad')
+    return ControllerConfig(**{k: tuple(float(x) for x in block[k]) for k in keys},
+                            **overrides)
+
+
+def build_six_joint(profile, path: PathBase, tcp=None, friction_mode: str = 'nominal',
+                    friction_file: str | Path | None = None, model=None,
+                    plant_config: PlantConfig | None = None,
+                    controller_config: ControllerConfig | None = None,
+                    tracker=None) -> tuple[Plant, PdPlusController]:
+    """Six-joint plant (config/plant.yaml's six joints) and PD+
+    (``six_axis_controller_config``) with the theta-profile ``profile`` (PathProfile (N, 6))
+    on ``path`` offered; the TCP ``tcp`` (4, 4) in tool0 (the point the path is about). The
+    plant starts at rest at the profile's start unless ``plant_config`` says otherwise."""
+    from irb_description.six_axis_model import SixJointModel
+
+    model = model or SixJointModel(tcp)
+    _, plant_friction = load_plant_friction(default_plant_yaml(), model.joint_names)
+    if plant_config is None:        # ideal brakes, as build_default's
+        plant_config = PlantConfig(initial_q=tuple(profile.q[0].tolist()))
+    if friction_mode == 'file' and friction_file is None:
+        friction_file = default_plant_yaml()
+    plant = Plant(model, plant_friction, plant_config)
+    ctrl = PdPlusController(model, path, controller_config or six_axis_controller_config(),
+                            controller_friction(model, friction_mode, friction_file))
+    ctrl.set_path_profile(profile, path, tracker)
     return plant, ctrl

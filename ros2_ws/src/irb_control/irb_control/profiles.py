@@ -318,12 +318,14 @@ def polynomial_theta_of_time(duration: float, n: int = 2001, theta_end: float = 
 def profile_from_theta_samples(model: RobotModel, path: PathBase, theta: np.ndarray,
                                theta_dot: np.ndarray, theta_ddot: np.ndarray,
                                t: np.ndarray | None = None, min_theta_dot: float = 0.05,
-                               grid: int = 721) -> PathProfile:
+                               grid: int = 721, joints=None) -> PathProfile:
     """PathProfile on a uniform theta grid from samples theta (M,), theta_dot, theta_ddot.
 
     The samples are resampled to ``grid`` points in theta. theta_dot is floored at
     ``min_theta_dot`` [rad/s] (delta of thesis §6.1) where it would stop the theta-driven
     controller (at the ends of a rest-to-rest profile); theta_ddot is set to 0 there.
+    ``joints``: theta (M,) -> an object with q, dq, ddq (M, n) (e.g. the six joints of
+    ``irb_description.orientation.joint_path6``); None = the three-axis ``joint_path``.
     """
     theta = np.asarray(theta, float)
     _check_finite('theta samples', theta, theta_dot, theta_ddot)
@@ -336,7 +338,7 @@ def profile_from_theta_samples(model: RobotModel, path: PathBase, theta: np.ndar
     floor = thd < min_theta_dot
     thd = np.where(floor, min_theta_dot, thd)
     thdd = np.where(floor, 0.0, thdd)
-    jp = joint_path(model, path, th_u)
+    jp = joint_path(model, path, th_u) if joints is None else joints(th_u)
     qd = jp.dq * thd[:, None]
     qdd = jp.ddq * thd[:, None] ** 2 + jp.dq * thdd[:, None]
     tt = None

@@ -102,3 +102,12 @@ class SixJointModel:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
         M = self.data.oMf[self._tool0]
         return M.translation + M.rotation @ self._tcp_p
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Linear TCP Jacobian (3, 6) [m/rad], d p / d q, in base_link axes."""
+        q = np.asarray(q, float)
+        J = pin.computeFrameJacobian(self.model, self.data, q, self._tool0,
+                                     pin.LOCAL_WORLD_ALIGNED)
+        r = self.data.oMf[self._tool0].rotation @ self._tcp_p     # tool0 -> TCP, base axes
+        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        return J[:3, :] - skew @ J[3:, :]          # v_tcp = v_tool0 + w x r
