@@ -386,6 +386,7 @@ class PdPlusController:
         self._t0 = 0.0
         self._ramp_from = np.zeros(n)
         self._ramp_to = np.zeros(n)
+        self._lower = np.tril_indices(n, -1)    # strictly lower triangle (``_step_n``)
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
         self.base_path = path            # the configured path: plans that carry none
@@ -775,9 +776,9 @@ class PdPlusController:
         isfinite = math.isfinite
         if not (all(map(isfinite, ql)) and all(map(isfinite, wl))):
             return self._rejected()
-        nan = self._nan_fields()
         if self.mode == MODE_STOPPED:
-            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, **nan)
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
+                                 **self._nan_fields())
         # safety on the measurement
         vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
         if any(abs(wl[i]) > vm[i] for i in R):
@@ -785,11 +786,12 @@ class PdPlusController:
         elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
-            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, **nan)
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
+                                 **self._nan_fields())
         prof = self.active          # the running reference: offered plans wait in pending
         if self.mode == MODE_IDLE:
             if not self._enable_requested or prof is None:
-                return ControlOutput(False, np.zeros(n), self.mode, **nan)
+                return ControlOutput(False, np.zeros(n), self.mode, **self._nan_fields())
             self._enable_requested = False
             self._ramp_from = q.copy()
             self._ramp_to = prof.q[0].copy()
@@ -901,13 +903,15 @@ class PdPlusController:
             self.stop(f'tracking error {np.abs(np.array(e)).round(4).tolist()} rad > '
                       f'{self.e_max.tolist()}')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
-                                 theta_p, theta_dot_ref, **nan)
+                                 theta_p, theta_dot_ref, **self._nan_fields())
         # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g
         q_p = np.array(p)
         pm, pd = self._pm, self._pd
-        Mu = pin.crba(pm, pd, q_p)
-        # symmetric M from the upper triangle pinocchio fills
-        M = np.triu(Mu) + np.triu(Mu, 1).T
+        # symmetric M from the upper triangle pinocchio fills (= np.triu(M) + np.triu(M, 1).T,
+        # +0.0 as there; np.triu itself costs ~50 us)
+        M = pin.crba(pm, pd, q_p) + 0.0
+        low = self._lower
+        M[low] = M.T[low]
         qd_ref_a = np.array(qd_ref)
         qdd_ref_a = np.array(qdd_ref)
         Ma = (M @ qdd_ref_a).tolist()
@@ -924,7 +928,7 @@ class PdPlusController:
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
-                                 theta_p, theta_dot_ref, **nan)
+                                 theta_p, theta_dot_ref, **self._nan_fields())
         # rate limit around the previous command, then the torque limit
         prev = self._prev_tau.tolist() if self._prev_tau is not None else None
         r, tmax = self.rate_max.tolist(), self.tau_max.tolist()

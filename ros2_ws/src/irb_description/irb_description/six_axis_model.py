@@ -99,9 +99,8 @@ class SixJointModel:
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """TCP position (3,) [m] in base_link for q (6,) [rad]."""
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
-        M = self.data.oMf[self._tool0]
-        return M.translation + M.rotation @ self._tcp_p
+        pin.forwardKinematics(self.model, self.data, np.asarray(q, float))
+        return pin.updateFramePlacement(self.model, self.data, self._tool0).act(self._tcp_p)
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """Linear TCP Jacobian (3, 6) [m/rad], d p / d q, in base_link axes."""

@@ -1,0 +1,174 @@
+#!/usr/bin/env python3
+"""Six-joint tracking and control-step cost in the offline closed loop (issue 30).
+
+    python ros2_ws/src/irb_control/benchmarks/bench_six_joint.py [--seeds 1 2 3]
+        [--repeats 3] [--energy] [--out six_joint]
+
+Tracking: the main job's gluing rectangle with the nozzle normal to its plane
+(irb_planning config/path6_rectangle.yaml, 0.10 m nozzle of config/six_axis_plan.yaml) at a
+TCP speed of 0.25 m/s: the planner's trapezoid along arc length (cruise 0.25 m/s, 10 % ramps,
+``baselines.trapezoid_profile``, T = L / (0.9 v), the convention of irb_bringup's
+bench_paths_sim), made into the six joints' message points by the six-axis planner
+(``SixAxisPlanner.trajectory``: IK along the path, points until the played check is within
+half its tolerances), turned into pdplus's theta-profile as the plan gate does
+(``profile_from_joint_trajectory``), run by the six-joint PD+ on the six-joint plant
+(``closed_loop.build_six_joint``) with the plant's own friction as feed-forward ('file', what
+a perfect identification gives; bench_paths_sim's convention) and with the nominal map.
+Measured on the plant's TRUE joint angles every period in PATH mode by the independent check's
+kinematics (irb_planning ``verify.DHTable``: the thesis's DH table, not pinocchio; projection
+``verify.PathCurve``; orientation against the law at the projected theta,
+``six_axis_check.rotation_angle``). Goals: 0.3 mm and 0.1 deg. ``--energy``: also the
+energy-optimal plan of the same mean speed (not a constant-speed motion).
+
+Step cost: ``PdPlusController.step`` alone (perf_counter around the call) on six joints (the
+tracking run above) and on three joints (the thesis's model on the same tilted rectangle, the
+default polynomial profile of 6 s, PathTracker as on six), interleaved, ``--repeats`` runs
+each in the same process; median, p90, p99, max and the p99 ratio (goal <= 1.2).
+Writes results/<out>.json; summary in RESULTS.md.
+"""
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / 'results'
+SPEED = 0.25
+
+
+def parse(argv):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--seeds', type=int, nargs='+', default=[1, 2, 3],
+                    help='plant noise seeds of the tracking runs')
+    ap.add_argument('--repeats', type=int, default=3, help='interleaved step-cost runs each')
+    ap.add_argument('--energy', action='store_true', help='also the energy-optimal plan')
+    ap.add_argument('--out', default='six_joint', help='results/<out>.json')
+    return ap.parse_args(argv)
+
+
+def main(argv=None):
+    a = parse(argv)
+    import numpy as np
+    from irb_description.model import RobotModel
+    from irb_description.params import load_kinematics
+    from irb_description.path import read_path_spec
+    from irb_description.six_axis_model import SixJointModel
+    from irb_planning.baselines import trapezoid_profile
+    from irb_planning.six_axis_check import rotation_angle
+    from irb_planning.six_axis_plan import SixAxisPlanner, config_path, task_from_spec
+    from irb_planning.verify import DHTable, PathCurve
+
+    from irb_control.closed_loop import (build_default, build_six_joint, simulate_closed_loop)
+    from irb_control.plant import PlantConfig
+    from irb_control.profiles import default_circle_profile, profile_from_joint_trajectory
+
+    out = {'load_average_before': os.getloadavg(), 'speed_m_s': SPEED}
+    spec_file = config_path().parent / 'path6_rectangle.yaml'
+    path, law = task_from_spec(read_path_spec(str(spec_file)))
+    t0 = time.perf_counter()
+    planner = SixAxisPlanner()
+    prob = planner.problem(path, law)
+    T = path.length / (0.9 * SPEED)
+    plans = {'trapezoid': planner.trajectory(prob, trapezoid_profile(T, 0.1))[0]}
+    if a.energy:
+        plans['energy'] = planner.plan(prob, 'energy', path.length / SPEED).trajectory
+    out['planning_s'] = time.perf_counter() - t0
+    tcp = planner.tcp
+    six = SixJointModel(tcp)
+    k = load_kinematics()
+    dh = DHTable(k.dh_a, k.dh_alpha, k.dh_d, k.dh_offset)
+    curve = PathCurve(path.point, path.d_point, path.dd_point, bool(path.closed))
+
+    def measure(r):
+        sel = r.mode == 2                               # PATH mode
+        Tq = dh.forward(r.q[sel]) @ tcp
+        p = Tq[:, :3, 3]
+        pos = curve.deviation(p)
+        th = np.clip(curve.theta(p), 0.0, 2 * np.pi)
+        ori = rotation_angle(np.asarray(law.rotation(th), float), Tq[:, :3, :3])
+        v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(r.t[sel])
+        je = np.nanmax(np.abs(r.joint_error()[sel]), axis=0)
+        return {'completed': bool(r.finished()), 'stop_reason': r.stop_reason,
+                'samples': int(sel.sum()),
+                'path_error_max_mm': float(pos.max() * 1e3),
+                'path_error_p99_mm': float(np.percentile(pos, 99) * 1e3),
+                'path_error_mean_mm': float(pos.mean() * 1e3),
+                'orientation_error_max_deg': float(np.degrees(ori.max())),
+                'orientation_error_p99_deg': float(np.degrees(np.percentile(ori, 99))),
+                'orientation_error_mean_deg': float(np.degrees(ori.mean())),
+                'worst_position_at_s': float(r.t[sel][int(np.argmax(pos))]),
+                'worst_orientation_at_s': float(r.t[sel][int(np.argmax(ori))]),
+                'tcp_speed_max_m_s': float(v.max()), 'tcp_speed_mean_m_s': float(v.mean()),
+                'joint_error_max_rad': je.tolist(), 'energy_J': float(r.energy)}
+
+    out['tracking'] = []
+    profiles = {}
+    for name, tr in plans.items():
+        prof = profile_from_joint_trajectory(six, path, tr['t'], tr['q'], tr['qd'], tr['qdd'])
+        profiles[name] = (prof, float(tr['t'][-1]))
+        for mode in ('file', 'nominal'):
+            for seed in a.seeds:
+                plant, ctrl = build_six_joint(
+                    prof, path, tcp, friction_mode=mode, model=six,
+                    plant_config=PlantConfig(initial_q=tuple(prof.q[0].tolist()), seed=seed))
+                r = simulate_closed_loop(plant, ctrl, float(tr['t'][-1]) + 1.5)
+                row = {'plan': name, 'friction_ff': mode, 'seed': seed,
+                       'duration_s': float(tr['t'][-1]), 'points': int(len(tr['t'])),
+                       **measure(r)}
+                out['tracking'].append(row)
+                print(json.dumps({k: row[k] for k in (
+                    'plan', 'friction_ff', 'seed', 'path_error_max_mm',
+                    'orientation_error_max_deg', 'stop_reason')}), flush=True)
+
+    # --- step cost, six vs three joints, interleaved ---------------------------------------
+    three = RobotModel.load()
+    prof6, dur6 = profiles['trapezoid']
+    prof3 = default_circle_profile(three, path, 6.0)
+
+    def timed(n):
+        if n == 6:
+            plant, ctrl = build_six_joint(prof6, path, tcp, friction_mode='file', model=six)
+            dur = dur6 + 1.0
+        else:
+            plant, ctrl = build_default('file', model=three, path=path)
+            ctrl.set_path_profile(prof3)
+            plant.reset(prof3.q[0])
+            dur = 7.0
+        ctrl.enable()
+        dt, moving = [], []
+        for _ in range(int(dur / plant.config.period_s)):
+            y = plant.measure()
+            t1 = time.perf_counter()
+            o = ctrl.step(y.t, y.q, y.qd)
+            dt.append(time.perf_counter() - t1)
+            moving.append(o.mode in (1, 2))
+            if o.publish:
+                plant.command(o.tau)
+            plant.step()
+        return np.array(dt)[np.array(moving)]
+    samples = {3: [], 6: []}
+    for _ in range(a.repeats):
+        for n in (3, 6):
+            samples[n].append(timed(n))
+
+    def stats(xs):
+        x = np.concatenate(xs) * 1e3
+        return {'median_ms': float(np.median(x)), 'p90_ms': float(np.percentile(x, 90)),
+                'p99_ms': float(np.percentile(x, 99)), 'max_ms': float(x.max()),
+                'samples': int(x.size),
+                'p99_per_run_ms': [float(np.percentile(r * 1e3, 99)) for r in xs]}
+    out['step_cost'] = {'three_joints': stats(samples[3]), 'six_joints': stats(samples[6])}
+    s3, s6 = out['step_cost']['three_joints'], out['step_cost']['six_joints']
+    out['step_cost']['p99_ratio_six_over_three'] = s6['p99_ms'] / s3['p99_ms']
+    out['step_cost']['median_ratio_six_over_three'] = s6['median_ms'] / s3['median_ms']
+    out['load_average_after'] = os.getloadavg()
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f'{a.out}.json').write_text(json.dumps(out, indent=1))
+    print(json.dumps({'step_cost': out['step_cost'], 'load': out['load_average_after']},
+                     indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
