@@ -154,14 +154,16 @@ def main(argv=None):
 
     def stats(xs):
         x = np.concatenate(xs) * 1e3
-        return {'median_ms': float(np.median(x)), 'p90_ms': float(np.percentile(x, 90)),
+        return {'min_ms': float(x.min()), 'p10_ms': float(np.percentile(x, 10)),
+                'median_ms': float(np.median(x)), 'p90_ms': float(np.percentile(x, 90)),
                 'p99_ms': float(np.percentile(x, 99)), 'max_ms': float(x.max()),
                 'samples': int(x.size),
                 'p99_per_run_ms': [float(np.percentile(r * 1e3, 99)) for r in xs]}
     out['step_cost'] = {'three_joints': stats(samples[3]), 'six_joints': stats(samples[6])}
     s3, s6 = out['step_cost']['three_joints'], out['step_cost']['six_joints']
     out['step_cost']['p99_ratio_six_over_three'] = s6['p99_ms'] / s3['p99_ms']
-    out['step_cost']['median_ratio_six_over_three'] = s6['median_ms'] / s3['median_ms']
+    for k in ('min', 'p10', 'median'):
+        out['step_cost'][f'{k}_ratio_six_over_three'] = s6[f'{k}_ms'] / s3[f'{k}_ms']
     out['load_average_after'] = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f'{a.out}.json').write_text(json.dumps(out, indent=1))

@@ -53,7 +53,8 @@ MODES = ('auto', 'realtime', 'paced', 'lockstep')
 _d = PlantConfig()
 SPEC = NodeSpec(
     'simulator', 'irb_control',
-    'The simulated IRB 1600 (joints 1-3 actuated, 4-6 locked): publishes joint_states every '
+    'The simulated IRB 1600 (joints 1-3 actuated, 4-6 locked; joints:=6 all six, issue 30): '
+    'publishes joint_states every '
     'period and applies the torque_command answering the latest one; brakes and latched '
     'errors as the axis computer. mode auto: real time on the steady clock where the host '
     'grants SCHED_FIFO (realtime_priority > 0), else lockstep on /clock paced at 1x wall '
@@ -64,11 +65,16 @@ SPEC = NodeSpec(
               "time), 'paced' (lockstep on /clock at lockstep_rate x wall clock: no deadline "
               "can be missed) or 'lockstep' (as fast as the controller answers)"),
         Param('lockstep_rate', 1.0, '', "paced: simulated seconds per wall-clock second"),
+        Param('joints', 3, '', "3: the thesis (joints 4-6 locked at 0, today's plant); 6: the "
+              'whole arm (irb_description six_axis_model, the six joints of the plant '
+              'friction file, its brakes torque_nm + wrist_torque_nm)'),
+        Param('tcp_xyz', [0.0, 0.0, 0.0], 'm', 'joints 6: the TCP in tool0 the camera sees '
+              '(e.g. [0, 0, 0.1], the gluing nozzle)'),
         Param('period_s', _d.period_s, 's', 'sample period'),
         Param('substeps', _d.substeps, '', 'integration substeps per period'),
         Param('delay_samples', _d.delay_samples, 'samples', 'command-to-effect delay'),
         Param('initial_positions', list(_d.initial_q), 'rad', 'start pose of joints 1-3 '
-              '(brakes on)'),
+              '(brakes on); joints 6: six values, or three with the wrist at 0'),
         Param('command_timeout_s', _d.command_timeout_s, 's', 'once commanded, no command '
               'answering the latest state for longer: brakes, error latched until ~/reset'),
         Param('encoder_resolution_rad', _d.encoder_resolution_rad, 'rad', 'encoder quantum '
@@ -94,7 +100,8 @@ SPEC = NodeSpec(
               "'single'"),
         *REALTIME_PARAMS),
     subscribes=(Topic('torque_command', 'sensor_msgs/JointState',
-                      'effort [N m] of joint_1..3, header.stamp = the answered state'),),
+                      'effort [N m] of joint_1..3 (joints 6: joint_1..6), header.stamp = the '
+                      'answered state'),),
     publishes=(
         Topic('joint_states', 'sensor_msgs/JointState',
               'q [rad], qd [rad/s], applied torque [N m], every period'),
@@ -142,18 +149,21 @@ class SimulatorNode(Node):
                     f"paced at {p['lockstep_rate']:g}x wall clock, every state answered "
                     '(pdplus follows /clock by itself); real time: -p mode:=realtime -p '
                     'realtime_priority:=20')
-        model = RobotModel.load()
+        model = _model(p['joints'], p['tcp_xyz'])
         self.joint_names = model.joint_names
         ffile = p['plant_friction_file'] or str(default_plant_yaml())
         _, friction = load_plant_friction(ffile, model.joint_names)
+        q0 = list(p['initial_positions'])
+        if p['joints'] == 6 and len(q0) == 3:
+            q0 += [0.0, 0.0, 0.0]
         self.config = PlantConfig(
             period_s=p['period_s'], substeps=p['substeps'], delay_samples=p['delay_samples'],
-            initial_q=tuple(p['initial_positions']), command_timeout_s=p['command_timeout_s'],
+            initial_q=tuple(q0), command_timeout_s=p['command_timeout_s'],
             encoder_resolution_rad=p['encoder_resolution_rad'],
             position_noise_rad=p['position_noise_rad'],
             velocity_noise_rad_s=p['velocity_noise_rad_s'],
             camera_period_s=p['camera_period_s'], camera_noise_m=p['camera_noise_m'],
-            seed=p['seed'], **load_plant_brakes(ffile))
+            seed=p['seed'], **load_plant_brakes(ffile, p['joints']))
         effects = load_plant_effects(p['plant_effects_file'] or ffile)
         self.plant = Plant(model, friction, self.config, effects)
         self.lockstep = self.mode in ('lockstep', 'paced')
@@ -229,7 +239,8 @@ class SimulatorNode(Node):
     def _apply_command(self, now: float, sec: int, nanosec: int, names: tuple, effort) -> None:
         tau = self._effort(names, effort)
         if tau is None:
-            self.get_logger().warn('torque_command without efforts for joints 1-3: ignored',
+            self.get_logger().warn(f'torque_command without efforts for joints 1-'
+                                   f'{len(self.joint_names)}: ignored',
                                    throttle_duration_sec=1.0)
             return
         key = sec * 1_000_000_000 + nanosec
@@ -258,6 +269,8 @@ class SimulatorNode(Node):
         if names and len(effort) == len(names) and (names is self._effort_names
                                                     or names == self._effort_names):
             i = self._effort_idx
+            if len(i) != 3:
+                return np.array([effort[j] for j in i], float)
             return np.array((effort[i[0]], effort[i[1]], effort[i[2]]), float)
         tau = _effort_by_name(names, effort, self.joint_names)
         if tau is not None and names and len(names) == len(effort):
@@ -451,6 +464,22 @@ def _percentiles(x: np.ndarray) -> dict | None:
         return None
     return {'p50': float(np.percentile(x, 50)), 'p99': float(np.percentile(x, 99)),
             'max': float(x.max()), 'over_one_period': int(np.sum(x > 4.032))}
+
+
+def _model(joints: int, tcp_xyz):
+    """The plant's model: the thesis's three joints, or all six with the TCP ``tcp_xyz``
+    [m] in tool0."""
+    if joints == 3:
+        return RobotModel.load()
+    if joints != 6:
+        raise ValueError(f'joints must be 3 or 6, not {joints}')
+    from irb_description.six_axis_model import SixJointModel
+    xyz = np.asarray(tcp_xyz, float)
+    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+        raise ValueError(f'tcp_xyz must be 3 finite numbers [m], not {list(tcp_xyz)}')
+    tcp = np.eye(4)
+    tcp[:3, 3] = xyz
+    return SixJointModel(tcp)
 
 
 def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:

@@ -205,3 +205,52 @@ def test_six_joint_closed_loop_follows_path_and_orientation(six, task):
                                 / np.sqrt(8), 0, 1))
     assert pos.max() < 1.0e-3, pos.max()
     assert np.degrees(ang.max()) < 1.0, np.degrees(ang.max())
+
+
+def test_simulator_node_with_six_joints():
+    """The simulator node with joints:=6: all six joints measured in /joint_states, commands
+    of six joints by name applied, a three-joint command refused (in-process, no DDS)."""
+    rclpy = pytest.importorskip('rclpy')
+    import os
+
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import JointState
+
+    from irb_control.simulator_node import SimulatorNode, _stamp
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    q0 = [0.0, 0.6, 0.2, 0.3, -0.5, 0.4]
+    node = SimulatorNode(context=ctx, parameter_overrides=[
+        Parameter('joints', value=6), Parameter('initial_positions', value=q0),
+        Parameter('tcp_xyz', value=[0.0, 0.0, 0.1])])
+    try:
+        sent = []
+        node.pub_state = type('C', (), {'publish': lambda self, m: sent.append(m)})()
+        measured = []
+        measure = node.plant.measure
+        node.plant.measure = lambda: measured.append(measure()) or measured[-1]
+        stamp = _stamp(1.0)
+        node._publish_state(stamp)
+        m = deserialize_message(sent[-1], JointState)
+        assert list(m.name) == [f'joint_{i}' for i in range(1, 7)]
+        assert m.position.tolist() == measured[-1].q.tolist()
+        np.testing.assert_allclose(m.position, q0, atol=1e-4)
+        applied = []
+        node.plant.command = lambda tau: applied.append(np.asarray(tau).tolist())
+        names = ['joint_6', 'joint_5', 'joint_4', 'joint_3', 'joint_2', 'joint_1']
+        cmd = JointState(name=names, effort=[6.0, 5.0, 4.0, 3.0, 2.0, 1.0])
+        cmd.header.stamp = stamp
+        node.on_command_raw(serialize_message(cmd))
+        assert applied[-1] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+        stamp = _stamp(1.004032)
+        node._publish_state(stamp)
+        three = JointState(name=['joint_1', 'joint_2', 'joint_3'], effort=[1.0, 2.0, 3.0])
+        three.header.stamp = stamp
+        node.on_command_raw(serialize_message(three))
+        assert len(applied) == 1                    # joints 4-6 missing: refused
+        assert node.plant.n == 6 and node.plant.config.brake_torque_nm[3:] == (20.0, 20.0,
+                                                                               10.0)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
