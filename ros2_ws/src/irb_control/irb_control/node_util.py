@@ -272,3 +272,21 @@ class LogThread:
                 logger.info(text)
             if self._q.empty():
                 self._idle.set()
+
+
+def joint_model(joints: int, tcp_xyz=(0.0, 0.0, 0.0)):
+    """The model of a node's ``joints`` parameter: 3 = the thesis's ``RobotModel`` (joints
+    4-6 locked), 6 = ``SixJointModel`` with the TCP ``tcp_xyz`` [m] in tool0 (issue 30)."""
+    import numpy as np
+    if joints == 3:
+        from irb_description.model import RobotModel
+        return RobotModel.load()
+    if joints != 6:
+        raise ValueError(f'joints must be 3 or 6, not {joints}')
+    from irb_description.six_axis_model import SixJointModel
+    xyz = np.asarray(tcp_xyz, float)
+    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+        raise ValueError(f'tcp_xyz must be 3 finite numbers [m], not {list(tcp_xyz)}')
+    tcp = np.eye(4)
+    tcp[:3, 3] = xyz
+    return SixJointModel(tcp)

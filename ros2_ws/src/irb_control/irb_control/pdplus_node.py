@@ -20,7 +20,6 @@ import threading
 import time
 
 import numpy as np
-from irb_description.model import RobotModel
 from irb_description.node_help import NodeSpec, Param, Topic
 from irb_description.node_main import (declare_params, latched_qos, run_node, state_pub_qos,
                                        state_qos)
@@ -33,6 +32,7 @@ from std_srvs.srv import Trigger
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
 from .node_util import (REALTIME_PARAMS, GcWatch, LogThread, declare_realtime,
+                        joint_model,
                         short_switch_interval, spin_with)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
@@ -51,6 +51,11 @@ SPEC = NodeSpec(
     'wait, pending, for ~/enable; the verdict goes out on ~/plan_status. Nothing moves '
     'unless enabled; stops latch until ~/enable.',
     params=(
+        Param('joints', 3, '', "3: the thesis's model (joints 4-6 locked; today's pdplus); 6: "
+              'all six joints (irb_description six_axis_model; per-joint parameters of six '
+              'values, config/pdplus_six_axis.yaml; builtin_profile none: plans only)'),
+        Param('tcp_xyz', [0.0, 0.0, 0.0], 'm', 'joints 6: the TCP in tool0 the path is about '
+              '(e.g. [0, 0, 0.1], the gluing nozzle)'),
         Param('kp', list(_d.kp), 'N m/rad', 'proportional gains'),
         Param('kd', list(_d.kd), 'N m s/rad', 'derivative gains'),
         Param('period_s', _d.period_s, 's', 'sample period'),
@@ -65,8 +70,8 @@ SPEC = NodeSpec(
               "'file'"),
         Param('friction_map_file', '', '', "friction-map YAML for mode 'file'"),
         Param('friction_blend_a', _d.friction_blend_a, 'rad/s', 'a of eq. 4.9'),
-        Param('torque_limit_nm', [0.0], 'N m', 'torque limits (3 values); [0.0] = the model '
-              'limits'),
+        Param('torque_limit_nm', [0.0], 'N m', 'torque limits (one per joint); [0.0] = the '
+              'model limits'),
         Param('torque_rate_limit_nm_s', list(_d.torque_rate_limit_nm_s), 'N m/s',
               'torque rate limits'),
         Param('velocity_limit_fraction', _d.velocity_limit_fraction, '',
@@ -172,7 +177,11 @@ class PdPlusNode(Node):
         self.log = LogThread(lambda: self.get_logger())
         self.gc_watch = (GcWatch(P['gc_report_ms'] * 1e-3, self.log.warn)
                          if P['gc_report_ms'] > 0 else None)
-        self.model = RobotModel.load()
+        self.model = joint_model(P['joints'], P['tcp_xyz'])
+        n = self.model.nq
+        if n == 6 and P['builtin_profile'] != 'none':
+            raise ValueError("joints 6 needs builtin_profile none (no built-in six-axis "
+                             'motion: plans only)')
         try:
             self.path = (load_path_file(P['path_file']) if P['path_file'] else
                          CirclePath(np.array(P['path_center'], float), P['path_radius'],
@@ -186,7 +195,7 @@ class PdPlusNode(Node):
             delay_prediction=P['delay_prediction'],
             ramp_min_duration_s=P['ramp_min_duration_s'],
             friction_blend_a=P['friction_blend_a'],
-            torque_limit_nm=None if len(tl) != 3 else tuple(tl),
+            torque_limit_nm=None if len(tl) != n else tuple(tl),
             torque_rate_limit_nm_s=tuple(P['torque_rate_limit_nm_s']),
             velocity_limit_fraction=P['velocity_limit_fraction'],
             max_tracking_error_rad=tuple(P['max_tracking_error_rad']),
@@ -239,7 +248,8 @@ class PdPlusNode(Node):
         self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
         self._decoder = JointStateDecoder()
-        self._cmd_enc = JointStateEncoder(self._names, 0, 0, 3)
+        self._cmd_enc = JointStateEncoder(self._names, 0, 0, n)
+        self._nan_in = _NAN3 if n == 3 else (math.nan,) * n     # a state without our joints
         self._state_enc = ControllerStateEncoder()
         self._deadline_s = float(P['deadline_s'])
         self._future_s = float(P['future_tolerance_s'])
@@ -266,8 +276,8 @@ class PdPlusNode(Node):
             max_points=int(P['max_plan_points']),
             max_acceleration=P['max_plan_acceleration_rad_s2'],
             torque_fraction=P['plan_torque_fraction'], friction_mode=P['friction_mode'],
-            friction_map_file=P['friction_map_file'],
-            domain_id=self.context.get_domain_id()), self.on_plan_result, self.on_gate_exit)
+            friction_map_file=P['friction_map_file'], joints=n,
+            tcp_xyz=tuple(P['tcp_xyz']), domain_id=self.context.get_domain_id()), self.on_plan_result, self.on_gate_exit)
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
             f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")
@@ -314,7 +324,7 @@ class PdPlusNode(Node):
         try:
             sec, nanosec, names, position, velocity, _ = self._decoder.decode(data)
         except ValueError as exc:
-            self.ctrl.step(math.nan, _NAN3, _NAN3)      # counted as a rejected input
+            self.ctrl.step(math.nan, self._nan_in, self._nan_in)   # a rejected input
             self.log.warn(f'joint_states refused: {exc}', throttle_s=1.0)
             return
         q, qd = self._select(names, position, velocity)
@@ -607,7 +617,7 @@ class PdPlusNode(Node):
             return False, 'no axis status yet: no drive to switch'
         if mode != 'hold':
             with self._lock:
-                qd = self._last_qd if self._last_qd is not None else _NAN3
+                qd = self._last_qd if self._last_qd is not None else self._nan_in
                 ok, why = self.ctrl.motors_off(np.asarray(qd, float), dry_run=True)
             if not ok:
                 return False, why
@@ -640,7 +650,7 @@ class PdPlusNode(Node):
                 ok, why = (self.ctrl.motors_on(np.asarray(q, float)) if q is not None
                            else (False, 'no joint state yet'))
             else:
-                qd = self._last_qd if self._last_qd is not None else _NAN3
+                qd = self._last_qd if self._last_qd is not None else self._nan_in
                 ok, why = self.ctrl.motors_off(np.asarray(qd, float))
             self.drive_mode = mode
         text = f'power mode {mode} ({name}: {r.message}); pdplus: {why}'
@@ -664,13 +674,15 @@ class PdPlusNode(Node):
             self._name_idx = _joint_indices(names, self._names)
         idx = self._name_idx
         if idx is None:
-            return _NAN3, _NAN3
-        i, j, k = idx
+            return self._nan_in, self._nan_in
         try:
+            if len(idx) != 3:       # six joints
+                return tuple(position[i] for i in idx), tuple(velocity[i] for i in idx)
+            i, j, k = idx
             return (position[i], position[j], position[k]), (velocity[i], velocity[j],
                                                              velocity[k])
         except IndexError:
-            return _NAN3, _NAN3
+            return self._nan_in, self._nan_in
 
 
 _NAN3 = (math.nan, math.nan, math.nan)

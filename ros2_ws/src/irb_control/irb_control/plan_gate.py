@@ -54,6 +54,8 @@ class GateConfig:
     torque_fraction: float = 0.9
     friction_mode: str = 'nominal'
     friction_map_file: str = ''
+    joints: int = 3                   # 6: the six-joint model (pdplus joints:=6)
+    tcp_xyz: tuple = (0.0, 0.0, 0.0)  # joints 6: the TCP in tool0 [m]
     domain_id: int = 0
     extra_ros_args: list = field(default_factory=list)
 
@@ -85,6 +87,9 @@ def check_message_arrays(names: list[str], t: np.ndarray, pos: np.ndarray, vel, 
     ff = None if friction is False else _feed_forward(model, friction)
     fields = ('theta', 'theta_dot', 'theta_ddot', 'q', 'qd', 'qdd', 't')
     if list(names) == [THETA_JOINT]:
+        if model.nq != 3:
+            raise PlanRejected('a theta plan gives the joints of the three-axis model only: '
+                               f'a {model.nq}-joint pdplus needs plans of its joints')
         th, thd, thdd = pos[:, 0], vel[:, 0], acc[:, 0]
         # the theta law checked like a joint: consistent, no step, theta_dot >= 0
         one = PlanLimits(np.array([-1e9]), np.array([1e9]), np.array([1e3]),
@@ -215,7 +220,6 @@ def main(argv=None) -> int:
         pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # the terminal's Ctrl-C is for pdplus
     import rclpy
-    from irb_description.model import RobotModel
     from irb_description.node_main import latched_qos
     from irb_description.path import CirclePath, load_path_file, path_from_spec
     from irb_description.path_tracking import PathTracker
@@ -227,7 +231,8 @@ def main(argv=None) -> int:
     from .plan_checks import PlanRejected
     from .profiles import ProfileError
     rclpy.init(args=['--ros-args', *cfg.extra_ros_args], domain_id=cfg.domain_id)
-    model = RobotModel.load()
+    from .node_util import joint_model
+    model = joint_model(cfg.joints, cfg.tcp_xyz)
     path = (load_path_file(cfg.path_file) if cfg.path_file else
             CirclePath(np.array(cfg.path_center, float), cfg.path_radius,
                        cfg.path_start_angle, int(cfg.path_direction)))
@@ -239,7 +244,7 @@ def main(argv=None) -> int:
         try:
             n = len(msg.points)
             from .plan_checks import PlanLimits, check_size
-            check_size(n, PlanLimits(*(np.zeros(3),) * 4, max_points=cfg.max_points))
+            check_size(n, PlanLimits(*(np.zeros(model.nq),) * 4, max_points=cfg.max_points))
             t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
                           for p in msg.points])
 
@@ -253,6 +258,10 @@ def main(argv=None) -> int:
             # the path the plan was planned on travels in header.frame_id (plan_path); a
             # plan without one is on the configured path
             spec = path_spec_from_frame_id(msg.header.frame_id)
+            if spec is not None and cfg.joints == 6:
+                # a six-axis plan's path carries its tool-orientation law: theta is estimated
+                # on the geometry (the joints already carry the orientation)
+                spec = {k: v for k, v in spec.items() if k != 'orientation'}
             try:
                 plan_path = path if spec is None else path_from_spec(spec)
             except ValueError as exc:

@@ -19,7 +19,6 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 from irb_description.electrical import BUS_MODES, load_electrical
-from irb_description.model import RobotModel
 from irb_description.node_help import NodeSpec, Param, Topic
 from irb_description.node_main import (declare_params, latched_qos, run_node, running,
                                        state_pub_qos, state_qos)
@@ -34,7 +33,7 @@ from std_srvs.srv import Trigger
 
 from .cdr import JointStateDecoder, JointStateEncoder
 from .node_util import (REALTIME_PARAMS, LogThread, apply_realtime, declare_realtime,
-                        fifo_refusal, make_executor, short_switch_interval)
+                        fifo_refusal, joint_model, make_executor, short_switch_interval)
 from .plant import (POWER_MODES, Plant, PlantConfig, config_path, default_plant_yaml,
                     load_plant_brakes, load_plant_friction)
 from .plant_effects import load_plant_effects
@@ -149,7 +148,7 @@ class SimulatorNode(Node):
                     f"paced at {p['lockstep_rate']:g}x wall clock, every state answered "
                     '(pdplus follows /clock by itself); real time: -p mode:=realtime -p '
                     'realtime_priority:=20')
-        model = _model(p['joints'], p['tcp_xyz'])
+        model = joint_model(p['joints'], p['tcp_xyz'])
         self.joint_names = model.joint_names
         ffile = p['plant_friction_file'] or str(default_plant_yaml())
         _, friction = load_plant_friction(ffile, model.joint_names)
@@ -464,22 +463,6 @@ def _percentiles(x: np.ndarray) -> dict | None:
         return None
     return {'p50': float(np.percentile(x, 50)), 'p99': float(np.percentile(x, 99)),
             'max': float(x.max()), 'over_one_period': int(np.sum(x > 4.032))}
-
-
-def _model(joints: int, tcp_xyz):
-    """The plant's model: the thesis's three joints, or all six with the TCP ``tcp_xyz``
-    [m] in tool0."""
-    if joints == 3:
-        return RobotModel.load()
-    if joints != 6:
-        raise ValueError(f'joints must be 3 or 6, not {joints}')
-    from irb_description.six_axis_model import SixJointModel
-    xyz = np.asarray(tcp_xyz, float)
-    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
-        raise ValueError(f'tcp_xyz must be 3 finite numbers [m], not {list(tcp_xyz)}')
-    tcp = np.eye(4)
-    tcp[:3, 3] = xyz
-    return SixJointModel(tcp)
 
 
 def _effort_by_name(msg_names, effort, names: list[str]) -> np.ndarray | None:

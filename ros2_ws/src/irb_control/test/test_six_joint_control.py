@@ -254,3 +254,96 @@ def test_simulator_node_with_six_joints():
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture(scope='module')
+def line_task():
+    """A line with the nozzle pointing down (no piece ends: a plan sampled anywhere keeps the
+    gate's consistency rule)."""
+    from irb_description.orientation import FixedOrientation
+    from irb_description.path import LinePath
+    return LinePath([0.55, -0.2, 0.3], [0.75, 0.15, 0.4]), FixedOrientation.from_axes(
+        [0.0, 0.0, -1.0])
+
+
+def _six_joint_plan(six, task, duration=3.0):
+    """A six-joint plan along ``task`` (t, q, qd, qdd), as the gate receives it."""
+    path, law = task
+    kin = SixAxisKinematics(tcp=TCP)
+    t, th, thd, thdd = polynomial_theta_of_time(duration, 301)
+    jp = joint_path6(kin, path, law, th, derivatives=True)
+    return (t, jp.q, jp.dq * thd[:, None],
+            jp.ddq * thd[:, None] ** 2 + jp.dq * thdd[:, None])
+
+
+def test_plan_gate_accepts_six_joint_plans(six, line_task):
+    task = line_task
+    from irb_control.plan_checks import PlanRejected
+    from irb_control.plan_gate import GateConfig, check_message_arrays
+    path, _ = task
+    t, q, qd, qdd = _six_joint_plan(six, task)
+    order = [5, 0, 3, 1, 4, 2]                       # by name, in any order
+    names = [f'joint_{i + 1}' for i in order]
+    cfg = GateConfig(joints=6, tcp_xyz=(0.0, 0.0, 0.1))
+    res = check_message_arrays(names, t, q[:, order], qd[:, order], qdd[:, order], six, path,
+                               cfg, six.friction)
+    assert res['kind'] == 'path' and res['arrays']['q'].shape[1] == 6
+    np.testing.assert_allclose(res['arrays']['q'][0], q[0], atol=1e-12)
+    with pytest.raises(PlanRejected, match='must be'):      # joints 4-6 missing
+        check_message_arrays(names[:3], t, q[:, :3], qd[:, :3], qdd[:, :3], six, path, cfg,
+                             six.friction)
+    with pytest.raises(PlanRejected, match='three-axis model only'):
+        check_message_arrays(['theta'], t, t[:, None], np.ones((t.size, 1)),
+                             np.zeros((t.size, 1)), six, path, cfg, six.friction)
+
+
+def test_pdplus_node_with_six_joints(six, line_task):
+    task = line_task
+    """pdplus with joints:=6 (config/pdplus_six_axis.yaml's gains): a six-joint plan offered,
+    enabled, and a six-joint joint state answered with six torques by name."""
+    rclpy = pytest.importorskip('rclpy')
+    import os
+    import uuid
+
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    from irb_control.pdplus_node import PdPlusNode
+    from irb_control.profiles import profile_from_joint_trajectory
+    c = six_axis_controller_config()
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    try:
+        over = [Parameter('joints', value=6), Parameter('tcp_xyz', value=[0.0, 0.0, 0.1]),
+                Parameter('builtin_profile', value='none'),
+                Parameter('require_axis_status', value=False)]
+        over += [Parameter(k, value=list(getattr(c, k))) for k in (
+            'kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad')]
+        node = PdPlusNode(context=ctx, namespace=f'/t{uuid.uuid4().hex[:8]}',
+                          parameter_overrides=over)
+        try:
+            assert node.ctrl.n == 6 and node.ctrl.kp.tolist() == list(c.kp)
+            sent = []
+            node.pub_cmd = type('C', (), {'publish': lambda self, m: sent.append(m)})()
+            node.pub_state = type('C', (), {'publish': lambda self, m: None})()
+            path, _ = task
+            t, q, qd, qdd = _six_joint_plan(six, task)
+            node.ctrl.set_path_profile(profile_from_joint_trajectory(six, path, t, q, qd, qdd),
+                                       path)
+            assert node.ctrl.enable()[0]
+            s = node.get_clock().now().nanoseconds * 1e-9
+            msg = JointState(name=[f'joint_{i}' for i in range(6, 0, -1)],
+                             position=q[0][::-1].tolist(), velocity=[0.0] * 6)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = int(s), int((s % 1) * 1e9)
+            node.on_state(msg)
+            cmd = deserialize_message(sent[-1], JointState) if isinstance(sent[-1], bytes) \
+                else sent[-1]
+            assert list(cmd.name) == [f'joint_{i}' for i in range(1, 7)]
+            assert len(cmd.effort) == 6 and np.all(np.isfinite(cmd.effort))
+        finally:
+            node.destroy_node()
+        with pytest.raises(Exception, match='builtin_profile none'):
+            PdPlusNode(context=ctx, parameter_overrides=[Parameter('joints', value=6)])
+    finally:
+        rclpy.try_shutdown(context=ctx)

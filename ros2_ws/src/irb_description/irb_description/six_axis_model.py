@@ -110,3 +110,8 @@ class SixJointModel:
         r = self.data.oMf[self._tool0].rotation @ self._tcp_p     # tool0 -> TCP, base axes
         skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
         return J[:3, :] - skew @ J[3:, :]          # v_tcp = v_tool0 + w x r
+
+    def inverse_dynamics(self, q, qd, qdd) -> np.ndarray:
+        """M qdd + C qd + g (6,) [N m] by RNEA (armature included), without friction."""
+        return pin.rnea(self.model, self.data, np.asarray(q, float), np.asarray(qd, float),
+                        np.asarray(qdd, float)).copy()
