@@ -90,24 +90,29 @@ def bench_loop(duration: float = 20.0, rt_priority: int = 20, repeats: int = 1) 
     return out
 
 
-def _loop_run(duration: float, rt_priority: int) -> dict:
+def _loop_run(duration: float, rt_priority: int, pdplus_args: tuple = (),
+              simulator_args: tuple = (), tag: str = '') -> dict:
+    """One loop run; ``pdplus_args``/``simulator_args``: more ROS arguments of each node
+    (bench_six_joint_loop: joints:=6), ``tag``: in the log and stats file names."""
     import rclpy
     from irb_interfaces.msg import ControllerState
 
     from irb_control.node_util import make_executor
     from irb_description.node_main import state_qos
     ns = f'/bench{os.getpid()}'
-    stats_path = RESULTS / 'loop_simulator_stats.json'
+    stats_path = RESULTS / f'loop_simulator_stats{tag}.json'
     RESULTS.mkdir(parents=True, exist_ok=True)
     common = ['--ros-args', '-r', f'__ns:={ns}', '-p', f'realtime_priority:={rt_priority}']
     # the nodes' output goes to files (a pipe nobody reads could fill and block a node)
-    tag = f'_rt{rt_priority}' if rt_priority else ''
+    tag = (f'_rt{rt_priority}' if rt_priority else '') + tag
     logs = {n: open(RESULTS / f'loop_{n}{tag}.log', 'w') for n in ('pdplus', 'simulator')}
     ctrl = subprocess.Popen([sys.executable, '-m', 'irb_control.pdplus_node', *common,
-                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=true'],
+                             '-p', 'profile_duration_s:=10.0', '-p', 'auto_enable:=true',
+                             *pdplus_args],
                             stdout=logs['pdplus'], stderr=subprocess.STDOUT, text=True)
     sim = subprocess.Popen([sys.executable, '-m', 'irb_control.simulator_node', *common,
-                            '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}'],
+                            '-p', 'mode:=realtime', '-p', f'stats_path:={stats_path}',
+                            *simulator_args],
                            stdout=logs['simulator'], stderr=subprocess.STDOUT, text=True)
     rclpy.init()
     node = rclpy.create_node('bench_listener')

@@ -53,7 +53,7 @@ SPEC = NodeSpec(
     params=(
         Param('joints', 3, '', "3: the thesis's model (joints 4-6 locked; today's pdplus); 6: "
               'all six joints (irb_description six_axis_model; per-joint parameters of six '
-              'values, config/pdplus_six_axis.yaml; builtin_profile none: plans only)'),
+              "values, config/pdplus_six_axis.yaml; builtin_profile 'none' or 'sine')"),
         Param('tcp_xyz', [0.0, 0.0, 0.0], 'm', 'joints 6: the TCP in tool0 the path is about '
               '(e.g. [0, 0, 0.1], the gluing nozzle)'),
         Param('kp', list(_d.kp), 'N m/rad', 'proportional gains'),
@@ -85,7 +85,7 @@ SPEC = NodeSpec(
               "or 'none' (no motion and no command until /planned_trajectory arrives)"),
         Param('profile_duration_s', 10.0, 's', 'built-in circle: one circle in this time'),
         Param('min_theta_dot', 0.05, 'rad/s', 'floor of h(theta)'),
-        Param('sine_joint', 1, '', 'built-in sine: joint 1..3'),
+        Param('sine_joint', 1, '', 'built-in sine: joint 1..3 (1..6 with joints 6)'),
         Param('sine_peak_speed_rad_s', 0.5, 'rad/s', 'built-in sine: peak speed'),
         Param('sine_amplitude_rad', 0.3, 'rad', 'built-in sine: amplitude A of A(1 - cos wt)'),
         Param('sine_cycles', 1.0, '', 'built-in sine: number of periods'),
@@ -179,9 +179,9 @@ class PdPlusNode(Node):
                          if P['gc_report_ms'] > 0 else None)
         self.model = joint_model(P['joints'], P['tcp_xyz'])
         n = self.model.nq
-        if n == 6 and P['builtin_profile'] != 'none':
-            raise ValueError("joints 6 needs builtin_profile none (no built-in six-axis "
-                             'motion: plans only)')
+        if n == 6 and P['builtin_profile'] == 'circle':
+            raise ValueError("joints 6: builtin_profile 'none' (plans only) or 'sine' (the "
+                             'circle has no tool orientation)')
         try:
             self.path = (load_path_file(P['path_file']) if P['path_file'] else
                          CirclePath(np.array(P['path_center'], float), P['path_radius'],
@@ -293,8 +293,11 @@ class PdPlusNode(Node):
     def _set_builtin_profile(self) -> None:
         P = self.P
         if P['builtin_profile'] == 'sine':
-            start = default_circle_profile(self.model, self.path, P['profile_duration_s'],
+            three = self.model if self.model.nq == 3 else joint_model(3)
+            start = default_circle_profile(three, self.path, P['profile_duration_s'],
                                            P['min_theta_dot']).q[0]
+            # six joints: the circle's start with the wrist at 0
+            start = np.r_[start, np.zeros(self.model.nq - 3)]
             traj = sine_trajectory(start, int(P['sine_joint']) - 1, P['sine_peak_speed_rad_s'],
                                    P['sine_amplitude_rad'], P['sine_cycles'])
             self.ctrl.set_time_trajectory(traj)

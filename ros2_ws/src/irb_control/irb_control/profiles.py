@@ -409,10 +409,11 @@ def sine_trajectory(q0: np.ndarray, joint: int, peak_speed: float, amplitude: fl
     """Single-joint motion q_j = q0_j + A (1 - cos(w t)), w = peak_speed / A (thesis §4.4).
 
     Starts at rest, peak speed ``peak_speed`` [rad/s]; ``cycles`` periods 2 pi / w; the other
-    joints stay at q0 (3,) [rad]. ``joint`` is 0, 1 or 2.
+    joints stay at q0 (n,) [rad]. ``joint`` is 0 .. n - 1.
     """
-    if joint not in (0, 1, 2) or not peak_speed > 0 or not amplitude > 0 or not cycles > 0:
-        raise ProfileError('joint in 0..2, peak_speed > 0, amplitude > 0, cycles > 0')
+    n = len(q0)
+    if joint not in range(n) or not peak_speed > 0 or not amplitude > 0 or not cycles > 0:
+        raise ProfileError(f'joint in 0..{n - 1}, peak_speed > 0, amplitude > 0, cycles > 0')
     w = peak_speed / amplitude
     duration = cycles * 2 * np.pi / w
     t = np.arange(0.0, duration + dt / 2, dt)

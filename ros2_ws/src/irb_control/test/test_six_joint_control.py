@@ -343,7 +343,7 @@ def test_pdplus_node_with_six_joints(six, line_task):
             assert len(cmd.effort) == 6 and np.all(np.isfinite(cmd.effort))
         finally:
             node.destroy_node()
-        with pytest.raises(Exception, match='builtin_profile none'):
+        with pytest.raises(Exception, match="builtin_profile 'none'"):
             PdPlusNode(context=ctx, parameter_overrides=[Parameter('joints', value=6)])
     finally:
         rclpy.try_shutdown(context=ctx)
