@@ -32,8 +32,7 @@ from std_srvs.srv import Trigger
 from .cdr import ControllerStateEncoder, JointStateDecoder, JointStateEncoder
 from .closed_loop import controller_friction
 from .node_util import (REALTIME_PARAMS, GcWatch, LogThread, declare_realtime,
-                        joint_model,
-                        short_switch_interval, spin_with)
+                        joint_model, short_switch_interval, spin_with)
 from .pd_plus import (MODE_HOLD, MODE_NAMES, MODE_STOPPED, MOVING, ControllerConfig,
                       PdPlusController, SettleGate, Watchdog, ramp_duration)
 from .plan_gate import GateConfig, PlanGate, profile_from_result
@@ -277,7 +276,8 @@ class PdPlusNode(Node):
             max_acceleration=P['max_plan_acceleration_rad_s2'],
             torque_fraction=P['plan_torque_fraction'], friction_mode=P['friction_mode'],
             friction_map_file=P['friction_map_file'], joints=n,
-            tcp_xyz=tuple(P['tcp_xyz']), domain_id=self.context.get_domain_id()), self.on_plan_result, self.on_gate_exit)
+            tcp_xyz=tuple(P['tcp_xyz']), domain_id=self.context.get_domain_id()),
+            self.on_plan_result, self.on_gate_exit)
         self.get_logger().info(
             f"pdplus: {P['reference_mode']}-driven, friction {P['friction_mode']}"
             f" ({friction.source if friction else 'off'}), Kp {P['kp']}, Kd {P['kd']}")

@@ -3,8 +3,8 @@
 Plain class, no ROS imports. The joint count n is the model's: 3 with ``RobotModel`` (joints
 1-3 actuated, 4-6 locked: the thesis's model, today's simulator, hand-unrolled below) or 6 with
 ``irb_description.six_axis_model.SixJointModel`` (the whole arm, issue 30: the same equations
-on n-vectors in ``_substep_n``). One call of ``Plant.step`` advances one controller period ``period_s``
-(0.004032 s) in ``substeps`` equal substeps (default 5, h = 0.806 ms) of semi-implicit Euler::
+on n-vectors in ``_substep_n``). One call of ``Plant.step`` advances one controller period
+``period_s`` (0.004032 s) in ``substeps`` equal substeps (default 5, h = 0.806 ms) of semi-implicit Euler::
 
     v+ = v + h M(q)^-1 (tau - C(q, v) v - g(q) - F_v v - lambda)
     q+ = q + h v+
