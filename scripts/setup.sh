@@ -120,6 +120,13 @@ cd "$ROOT/ros2_ws"
 # the whole package (tf2_ros needs its other interfaces), so the stand-in must not hide it
 SKIP=()
 if [ "$MODE" = system ]; then SKIP=(--packages-skip tf2_msgs); fi
+# colcon gives make "-jN -lN" (N = cores): the load limit keeps the interface package's C/C++
+# typesupports on one job while another package builds beside it. Jobs without the load limit,
+# unless MAKEFLAGS already sets them.
+case " ${MAKEFLAGS:-} " in
+  *" -j"*|*" --jobs"*|*" -l"*|*" --load-average"*) ;;
+  *) export MAKEFLAGS="${MAKEFLAGS:+$MAKEFLAGS }-j$(nproc)" ;;
+esac
 build() {
   colcon build --symlink-install --event-handlers console_cohesion- summary+ "${SKIP[@]}" \
     --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF > "$ROOT/ros2_ws/build.log" 2>&1
