@@ -316,8 +316,7 @@ def identify_series(series_list: list[JointSeries], joint_names: list[str],
     unsteady = {j: [] for j in segs}
 
     def model_torque(q, qd):
-        zero = np.zeros(q.shape[1])
-        return np.array([model.inverse_dynamics(a, b, zero) for a, b in zip(q, qd)])
+        return model.inverse_dynamics_batch(q, qd, np.zeros_like(q))
     mt = model_torque if model is not None else None
     for s, label in zip(series_list, labels):
         s = s.select(joint_names)

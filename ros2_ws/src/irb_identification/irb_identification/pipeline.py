@@ -104,8 +104,8 @@ def rigid_body_torque(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                       rows: np.ndarray) -> np.ndarray:
     """M q_dd + C q_d + g (N, n) [N m] of the model at ``rows`` (others nan)."""
     out = np.full(q.shape, np.nan)
-    for i in np.flatnonzero(rows):
-        out[i] = model.inverse_dynamics(q[i], qd[i], qdd[i])
+    idx = np.flatnonzero(rows)
+    out[idx] = model.inverse_dynamics_batch(q[idx], qd[idx], qdd[idx])
     return out
 
 

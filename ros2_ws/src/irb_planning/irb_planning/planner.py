@@ -197,10 +197,8 @@ class Planner:
 
     def rigid_torque(self, q, qd, qdd):
         """pinocchio RNEA on the URDF, no friction, for (M, n) arrays -> (M, n) [N m]."""
-        q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
         with self._model_lock:
-            return np.array([self.model.inverse_dynamics(q[k], qd[k], qdd[k])
-                             for k in range(q.shape[0])])
+            return self.model.inverse_dynamics_batch(q, qd, qdd)
 
     def check_path(self, req: PlanRequest, path: PathBase) -> None:
         """The whole joint motion along the path (cached per path); PlanError(UNREACHABLE)."""

@@ -178,8 +178,8 @@ def encoder_offset_torque(model, q, qd, qdd, h: float = 1e-6) -> np.ndarray:
         up, dn = np.array(q, float), np.array(q, float)
         up[:, k] += h
         dn[:, k] -= h
-        tu = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(up, qd, qdd)])
-        td = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(dn, qd, qdd)])
+        tu = model.inverse_dynamics_batch(up, qd, qdd)
+        td = model.inverse_dynamics_batch(dn, qd, qdd)
         out[:, :, k] = (tu - td) / (2 * h)
     return out
 
@@ -196,8 +196,8 @@ def encoder_scale_torque(model, friction, q, qd, qdd, h: float = 1e-5) -> np.nda
         for arr_u, arr_d in zip(up, dn):
             arr_u[:, k] *= 1 + h
             arr_d[:, k] *= 1 - h
-        tu = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(*up)])
-        td = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(*dn)])
+        tu = model.inverse_dynamics_batch(*up)
+        td = model.inverse_dynamics_batch(*dn)
         tu += friction.torque(up[1])
         td += friction.torque(dn[1])
         out[:, :, k] = (tu - td) / (2 * h)

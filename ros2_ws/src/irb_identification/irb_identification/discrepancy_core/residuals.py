@@ -150,7 +150,7 @@ def prepare_run(run: RunData, model, friction, config: ResidualConfig = Residual
     e_mid = run.effort.copy()
     e_mid[:-1] = 0.5 * (run.effort[:-1] + run.effort[1:])   # torque around t_k
     effort = savgol_filter(e_mid, w, c.sg_order, axis=0)
-    tau_rigid = np.array([model.inverse_dynamics(a, b, d) for a, b, d in zip(q, qd, qdd)])
+    tau_rigid = model.inverse_dynamics_batch(q, qd, qdd)
     tau_f = friction.torque(qd)
     r_tau = effort - tau_rigid - tau_f
     # what L itself does to this excitation's torque: L(tau_hat) - tau_hat of the model's own
