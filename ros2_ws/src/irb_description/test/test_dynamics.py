@@ -21,6 +21,20 @@ def test_casadi_rnea_equals_pinocchio_rnea(model, rng):
         assert np.abs(np.asarray(f(q, qd, qdd)).ravel() - ref).max() <= 1e-9
 
 
+def test_batched_rnea_equals_rnea_row_by_row(model, rng):
+    # the plan check and identification evaluate (M, 3) arrays with inverse_dynamics_batch
+    q = rng.uniform(model.limits.lower, model.limits.upper, (500, 3))
+    qd, qdd = rng.uniform(-3, 3, (500, 3)), rng.uniform(-10, 10, (500, 3))
+    rows = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(q, qd, qdd)])
+    assert np.array_equal(model.inverse_dynamics_batch(q, qd, qdd), rows)
+    assert np.array_equal(model.inverse_dynamics_batch(q[:1], qd[:1], qdd[:1]), rows[:1])
+    assert model.inverse_dynamics_batch(q[:0], qd[:0], qdd[:0]).shape == (0, 3)
+    # a model changed after load (identification's perturbed copies) is the one evaluated
+    other = model.copy()
+    other.model.inertias[2].mass *= 1.5
+    assert not np.allclose(other.inverse_dynamics_batch(q, qd, qdd), rows)
+
+
 def test_casadi_rnea_is_differentiable(model):
     q, qd, qdd = (ca.SX.sym(n, 3) for n in ('q', 'qd', 'qdd'))
     tau = rnea_function(model)(q, qd, qdd)
