@@ -675,9 +675,14 @@ class BagIntegrity:
         return f'{self.path}: {self.messages} messages in {len(self.files)} file(s), {crc}'
 
 
+#: libyaml's safe loader where PyYAML has it (metadata.yaml of a long bag: 10x faster)
+_YAML_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+
+
 def _metadata_info(bag: Path) -> dict:
     try:
-        return yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        return yaml.load((bag / 'metadata.yaml').read_text(),
+                         Loader=_YAML_LOADER)['rosbag2_bagfile_information']
     except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
         raise BagError(f'bag {bag}: unreadable metadata.yaml ({type(exc).__name__})') from None
 
@@ -803,6 +808,19 @@ def _check_file(bag: Path, rel: str) -> tuple[dict[str, int], int, int]:
 
 
 _CHECKED: dict = {}
+_TOPICS: dict = {}
+
+
+def _state_key(bag: Path, info: dict):
+    """(path, every split file's size and mtime, metadata.yaml's mtime) of a bag directory:
+    what the per-state caches key on; None where a file cannot be stat'ed."""
+    files = list(info.get('relative_file_paths') or [])
+    try:
+        return (str(bag.resolve()), tuple((rel, (bag / rel).stat().st_size,
+                                           (bag / rel).stat().st_mtime_ns) for rel in files),
+                (bag / 'metadata.yaml').stat().st_mtime_ns)
+    except OSError:
+        return None
 
 
 def check_bag(path: str | Path) -> BagIntegrity:
@@ -812,12 +830,7 @@ def check_bag(path: str | Path) -> BagIntegrity:
     bag = Path(path)
     info = _metadata_info(bag)
     files = list(info.get('relative_file_paths') or [])
-    try:
-        key = (str(bag.resolve()), tuple((rel, (bag / rel).stat().st_size,
-                                          (bag / rel).stat().st_mtime_ns) for rel in files),
-               (bag / 'metadata.yaml').stat().st_mtime_ns)
-    except OSError:
-        key = None
+    key = _state_key(bag, info)
     if key is not None and key in _CHECKED:
         return _CHECKED[key]
     if info.get('storage_identifier', 'mcap') != 'mcap':
@@ -879,12 +892,29 @@ def _open_reader(path: Path, check: bool = True):
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:
-    """{topic: msgtype} of a bag."""
-    reader = _open_reader(Path(path))
+    """{topic: msgtype} of a bag (cached per file state, as ``check_bag``: opening a bag
+    parses its metadata, about 0.2 s, and the readers ask each bag more than once)."""
+    path = Path(path)
+
+    def key():
+        if not (path.is_dir() and (path / 'metadata.yaml').is_file()):
+            return None
+        try:
+            return _state_key(path, _metadata_info(path))
+        except BagError:
+            return None
+    k = key()
+    if k is not None and k in _TOPICS:
+        return dict(_TOPICS[k])
+    reader = _open_reader(path)      # recovery and the integrity check, as for every read
     try:
-        return {c.topic: c.msgtype for c in reader.connections}
+        out = {c.topic: c.msgtype for c in reader.connections}
     finally:
         reader.close()
+    k = key()                        # after a recovery the bag's state is the new one
+    if k is not None:
+        _TOPICS[k] = dict(out)
+    return out
 
 
 def read_messages(path: str | Path, topics: Iterable[str] | None = None
