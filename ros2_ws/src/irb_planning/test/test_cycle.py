@@ -282,46 +282,27 @@ def test_unreachable_and_broken_chains_are_refused_before_planning():
         check_continuity(gap)
 
 
-def test_cycle_plans_pass_pdplus_plan_gate(tmp_path, monkeypatch, capsys):
-    """Every plan the cycle planner keeps (the front points and the time-optimal one) passes
-    pdplus's plan gate itself (irb_control.plan_gate: the same rules, implemented apart, with
-    its own feed-forward): the main job's moves to and from the part-exchange pose at the
-    full limits (grid 30). A plan the gate would refuse is not kept: with a gate taking at
-    most 12 rad/s^2 the time-optimal move (12.7 rad/s^2 near its end, set by the jerk
-    limits) is refused after the re-plans at tighter limits, in one line naming the rule."""
-    import json
+def test_a_plan_pdplus_gate_would_refuse_is_not_kept(tmp_path, monkeypatch, capsys):
+    """cycle.gate_check applies pdplus's plan-gate rules (irb_description.trajectory_rules)
+    to every plan: with a gate taking at most 12 rad/s^2 the time-optimal move to the part
+    exchange pose (12.7 rad/s^2 near its end, set by the jerk limits, grid 30) is refused
+    after the re-plans at tighter limits, in one line naming the rule. (That the kept plans
+    pass pdplus's own gate: irb_bringup test_cross_package_plans.)"""
     from irb_planning import cycle
-    gate = pytest.importorskip('irb_control.plan_gate')
-    from irb_description.model import RobotModel
-    from irb_description.path import path_from_spec
     from irb_planning.cycle_cli import main
     line = {'type': 'line', 'waypoints': [[0.7, -0.09950371902099892, 0.3099503719020999],
                                           [0.45, -0.45, 0.45]]}
-    back = {'type': 'line', 'waypoints': line['waypoints'][::-1]}
     cyc = {'takt_s': 4.0, 'grid_size': 30,
            'operations': [{'motion': 'to_exchange', 'path': line, 'durations_s': [0.7]},
                           {'wait': 'idle'},
-                          {'motion': 'back', 'path': back, 'durations_s': [0.7]}]}
+                          {'motion': 'back', 'path': {'type': 'line', 'waypoints':
+                                                      line['waypoints'][::-1]},
+                           'durations_s': [0.7]}]}
     f = tmp_path / 'c.yaml'
     f.write_text(yaml.safe_dump(cyc))
-    assert main(['--cycle', str(f), '--out', str(tmp_path / 'out'), '--no-plots',
-                 '--cache', str(tmp_path / 'fronts')]) == 0
-    model = RobotModel.load()
-    kept = 0
-    for name, path in (('to_exchange', line), ('back', back)):
-        (c,) = [json.loads(p.read_text()) for p in (tmp_path / 'fronts').glob(f'{name}-*')]
-        for rec in [c['fastest'], *c['points'].values()]:
-            tr = rec['trajectory']
-            gate.check_message_arrays(['joint_1', 'joint_2', 'joint_3'],
-                                      *(np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd')),
-                                      model, path_from_spec(path), gate.GateConfig(),
-                                      model.friction)
-            kept += 1
-    assert kept == 4
-    capsys.readouterr()
     monkeypatch.setattr(cycle, 'GATE_MAX_ACCELERATION_RAD_S2', 12.0)
-    assert main(['--cycle', str(f), '--out', str(tmp_path / 'out2'), '--no-plots',
-                 '--cache', str(tmp_path / 'fronts2')]) == 1
+    assert main(['--cycle', str(f), '--out', str(tmp_path / 'out'), '--no-plots',
+                 '--cache', str(tmp_path / 'fronts')]) == 1
     err = capsys.readouterr().err.strip()
     assert "pdplus's plan gate refuses it" in err and 'limiting it to 12' in err
     assert '\n' not in err
