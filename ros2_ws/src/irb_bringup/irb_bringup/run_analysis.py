@@ -28,6 +28,10 @@ import numpy as np
 #: [s] a gap between samples above this inside the window is reported (the recorder lost
 #: samples or the publisher stalled); samples come every 4.032 ms (camera every 10 ms)
 MAX_SAMPLE_GAP_S = 0.05
+#: [s] two topics' stamps of the same instant, converted to float seconds on different paths
+#: (sec + 1e-9 nanosec, ns * 1e-9), may differ by a step of the double (2.4e-7 s at 1.7e9 s):
+#: the window takes samples this close to its ends (samples are >= 1 ms apart)
+STAMP_TOLERANCE_S = 1e-6
 DRIVE_SUFFIX = '_drive'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 CONTROLLER_STATE = 'irb_interfaces/msg/ControllerState'
@@ -283,7 +287,7 @@ def path_phases(t: np.ndarray, mode: np.ndarray) -> list[tuple[float, float]]:
 def mechanical_energy(t: np.ndarray, tau: np.ndarray, qd: np.ndarray, t0: float, t1: float
                       ) -> float:
     """E = int_t0^t1 sum_i |tau_i qd_i| dt [J], trapezoidal rule on the samples inside."""
-    sel = (t >= t0) & (t <= t1)
+    sel = (t >= t0 - STAMP_TOLERANCE_S) & (t <= t1 + STAMP_TOLERANCE_S)
     return float(np.trapezoid(np.abs(tau[sel] * qd[sel]).sum(axis=1), t[sel]))
 
 
@@ -333,7 +337,7 @@ def run_figs(run: RunData, model, path=None) -> RunFigs:
     f = RunFigs()
     t0, t1 = run.window
     f.duration = t1 - t0
-    sel = (run.js_t >= t0) & (run.js_t <= t1)
+    sel = (run.js_t >= t0 - STAMP_TOLERANCE_S) & (run.js_t <= t1 + STAMP_TOLERANCE_S)
     f.energy = mechanical_energy(run.js_t, run.tau, run.qd, t0, t1)
     f.energy_all = mechanical_energy(run.js_t, run.tau, run.qd, -np.inf, np.inf)
     f.t_tcp = run.js_t[sel] - t0

@@ -50,3 +50,37 @@ def test_plans_on_the_gluing_rectangle_pass_the_plan_gate(model, objective):
     th = out['arrays']['theta']
     assert th[0] == pytest.approx(0.0, abs=1e-6) and th[-1] == pytest.approx(2 * np.pi,
                                                                                abs=1e-6)
+
+
+@pytest.mark.slow
+def test_work_cycle_plans_pass_the_plan_gate(model, tmp_path):
+    """Issue 29: every plan the cycle planner keeps (front points and time-optimal ones) for
+    the main job's moves to and from the part-exchange pose at the full limits (grid 30)
+    passes pdplus's plan gate itself, the same rules implemented apart with its own
+    feed-forward, as cycle_run sends them (joint names, q, qd, qdd at the points)."""
+    import json
+
+    import yaml
+    from irb_description.path import path_from_spec
+    from irb_planning.cycle_cli import main
+    line = {'type': 'line', 'waypoints': [[0.7, -0.09950371902099892, 0.3099503719020999],
+                                          [0.45, -0.45, 0.45]]}
+    back = {'type': 'line', 'waypoints': line['waypoints'][::-1]}
+    cyc = {'takt_s': 4.0, 'grid_size': 30,
+           'operations': [{'motion': 'to_exchange', 'path': line, 'durations_s': [0.7]},
+                          {'wait': 'idle'},
+                          {'motion': 'back', 'path': back, 'durations_s': [0.7]}]}
+    f = tmp_path / 'c.yaml'
+    f.write_text(yaml.safe_dump(cyc))
+    assert main(['--cycle', str(f), '--out', str(tmp_path / 'out'), '--no-plots',
+                 '--cache', str(tmp_path / 'fronts')]) == 0
+    kept = 0
+    for name, path in (('to_exchange', line), ('back', back)):
+        (c,) = [json.loads(p.read_text()) for p in (tmp_path / 'fronts').glob(f'{name}-*')]
+        for rec in [c['fastest'], *c['points'].values()]:
+            tr = rec['trajectory']
+            check_message_arrays(model.joint_names,
+                                 *(np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd')),
+                                 model, path_from_spec(path), GateConfig(), model.friction)
+            kept += 1
+    assert kept == 4

@@ -118,7 +118,9 @@ def test_report_of_a_closed_loop_run_along_a_line(loop, tmp_path, capsys):
     # the window: first to last controller state in path mode (2)
     tc = raw['ctrl_t'][raw['mode'] == 2]
     t0, t1 = tc.min(), tc.max()
-    assert s['window_s'] == pytest.approx([t0, t1], abs=1e-9)
+    # to the double's resolution at 1.7e9 s (2.4e-7 s): the report reads the stamps as
+    # sec + 1e-9 nanosec, this test has ns * 1e-9
+    assert s['window_s'] == pytest.approx([t0, t1], abs=np.spacing(t1))
     # mechanical energy: this test's own trapezoid rule over the raw arrays it wrote
     t, p = raw['t'], np.abs(raw['tau'] * raw['qd']).sum(axis=1)
     sel = np.flatnonzero((t >= t0) & (t <= t1))
@@ -156,7 +158,9 @@ def test_a_gap_in_a_series_is_said_six_joints_picked_by_name(loop, tmp_path, cap
     # six joints in /joint_states: the model's three picked by name, energy over them
     t0, t1 = s['window_s']
     t, p = raw['t'], np.abs(raw['tau'] * raw['qd']).sum(axis=1)
-    sel = np.flatnonzero((t >= t0) & (t <= t1))
+    # the window's ends from the report are the controller's stamps read as sec + 1e-9 nsec:
+    # the same instants as this test's ns * 1e-9 within a microsecond (samples are 4 ms apart)
+    sel = np.flatnonzero((t >= t0 - 1e-6) & (t <= t1 + 1e-6))
     own = sum(0.5 * (p[i] + p[j]) * (t[j] - t[i]) for i, j in zip(sel[:-1], sel[1:]))
     assert s['mechanical_energy_j'] == pytest.approx(own, rel=1e-9)
 

@@ -224,8 +224,10 @@ def six_axis_controller_config(path: str | Path | None = None, **overrides) -> C
     p = Path(path) if path else config_path('pdplus_six_axis.yaml')
     block = yaml.safe_load(p.read_text())['pdplus']['ros__parameters']
     keys = ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad')
-    return ControllerConfig(**{k: tuple(float(x) for x in block[k]) for k in keys},
-                            **overrides)
+    kw = {k: tuple(float(x) for x in block[k]) for k in keys}
+    design = block.get('gain_design_inertia_kg_m2', [])
+    kw['gain_design_inertia_kg_m2'] = tuple(float(x) for x in design) if design else None
+    return ControllerConfig(**{**kw, **overrides})
 
 
 def build_six_joint(profile, path: PathBase, tcp=None, friction_mode: str = 'nominal',

@@ -184,6 +184,16 @@ def _scaled(q, qd, qdd, k: float, k_dot: float) -> tuple:
             [qdd[i] * k * k + qd[i] * k_dot for i in range(len(qd))])
 
 
+def gain_scale(m_diag, design) -> np.ndarray:
+    """Factor (3,) on kp_i and kd_i: min(1, M_ii(q) / design_i), design (3,) [kg m^2] the
+    inertia the gains were tuned for (None: ones, constant gains). ``step`` applies the same
+    rule in plain floats."""
+    m = np.asarray(m_diag, float)
+    if design is None:
+        return np.ones_like(m)
+    return np.minimum(1.0, m / np.asarray(design, float))
+
+
 def ramp_duration(q0: np.ndarray, q1: np.ndarray, velocity_limit: np.ndarray,
                   minimum: float = 0.5, speed_fraction: float = 0.5) -> float:
     """Ramp time [s]: ``minimum`` (0.5 s, thesis §6.4.4), longer if the quintic's peak speed
@@ -199,6 +209,10 @@ class ControllerConfig:
 
     kp: tuple = (14000.0, 9000.0, 2500.0)         # [N m/rad]
     kd: tuple = (800.0, 500.0, 140.0)             # [N m s/rad]
+    #: [kg m^2] the inertia M_ii the gains were tuned for (kp ~ M_ii w^2, kd ~ 2 zeta w M_ii
+    #: at the thesis circle); where M_ii(q) is smaller, kp_i and kd_i are scaled by
+    #: M_ii(q) / this (never above the configured gains); None = constant gains (thesis)
+    gain_design_inertia_kg_m2: tuple | None = (22.0, 15.0, 4.0)
     period_s: float = PERIOD_S
     prediction_samples: int = 3
     ramp_min_duration_s: float = 0.5
@@ -232,6 +246,11 @@ class ControllerConfig:
             v = np.asarray(getattr(self, name), float)
             if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
                 raise ValueError(f'{name} must be {n} finite numbers >= 0, got {v}')
+        if self.gain_design_inertia_kg_m2 is not None:
+            v = np.asarray(self.gain_design_inertia_kg_m2, float)
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError(f'gain_design_inertia_kg_m2 must be {n} finite numbers > 0 '
+                                 f'or None, got {v}')
         if self.torque_limit_nm is not None:
             v = np.asarray(self.torque_limit_nm, float)
             if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
@@ -357,6 +376,8 @@ class PdPlusController:
         c = config
         self.kp = np.asarray(c.kp, float)
         self.kd = np.asarray(c.kd, float)
+        self._m_design = (None if c.gain_design_inertia_kg_m2 is None
+                          else [float(x) for x in c.gain_design_inertia_kg_m2])
         lim = self.model.limits
         self.tau_max = lim.torque.copy() if c.torque_limit_nm is None else np.asarray(
             c.torque_limit_nm, float)
@@ -727,6 +748,17 @@ class PdPlusController:
         else:
             tf = [0.0, 0.0, 0.0]
         kp, kd = self.kp.tolist(), self.kd.tolist()
+        md = self._m_design
+        if md is not None:
+            # inertia-scheduled gains: the loop's bandwidth (kp/M_ii, kd/M_ii) never exceeds
+            # the tuned one. With constant gains, M_11 = 9 kg m^2 at the part-exchange pose
+            # (22 at the circle) put joint 1 at 2.4x its tuned bandwidth, beyond the ~1.6x the
+            # 3-sample delay allows: an 8.7 Hz limit cycle on the torque-rate limit
+            # (doc/gain_schedule.md)
+            for i, m_ii in enumerate((m00, m11, m22)):
+                if m_ii < md[i]:
+                    s_i = m_ii / md[i]
+                    kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
         fb = [kp[0] * e[0] + kd[0] * de[0], kp[1] * e[1] + kd[1] * de[1],
               kp[2] * e[2] + kd[2] * de[2]]
         tau = [tm[0] + tf[0] + fb[0], tm[1] + tf[1] + fb[1], tm[2] + tf[2] + fb[2]]
@@ -923,6 +955,13 @@ class PdPlusController:
         else:
             tf = zero
         kp, kd = self.kp.tolist(), self.kd.tolist()
+        md = self._m_design
+        if md is not None:          # inertia-scheduled gains, as in ``step``
+            for i in R:
+                m_ii = M[i, i]
+                if m_ii < md[i]:
+                    s_i = float(m_ii) / md[i]
+                    kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
         fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
         tau = [tm[i] + tf[i] + fb[i] for i in R]
         if not all(map(isfinite, tau)):

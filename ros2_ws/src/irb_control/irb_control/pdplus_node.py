@@ -42,6 +42,7 @@ from .profiles import (ProfileError, TimeTrajectory, default_circle_profile, dis
 
 
 _d = ControllerConfig()
+_g = GateConfig()       # the plan gate's limits: irb_description.trajectory_rules (one source)
 SPEC = NodeSpec(
     'pdplus', 'irb_control',
     'The theta-driven inverse-dynamics PD+ controller with friction feed-forward: answers each '
@@ -57,6 +58,10 @@ SPEC = NodeSpec(
               '(e.g. [0, 0, 0.1], the gluing nozzle)'),
         Param('kp', list(_d.kp), 'N m/rad', 'proportional gains'),
         Param('kd', list(_d.kd), 'N m s/rad', 'derivative gains'),
+        Param('gain_design_inertia_kg_m2', list(_d.gain_design_inertia_kg_m2), 'kg m^2',
+              'the inertia M_ii the gains were tuned for: where M_ii(q) is smaller, kp_i and '
+              'kd_i scale by M_ii(q) / this (never above kp, kd); [] = constant gains',
+              type='double[]'),
         Param('period_s', _d.period_s, 's', 'sample period'),
         Param('prediction_samples', _d.prediction_samples, 'samples', 'delay compensation'),
         Param('delay_prediction', _d.delay_prediction, '', "q, qd over the delay: "
@@ -115,10 +120,10 @@ SPEC = NodeSpec(
         Param('future_tolerance_s', 0.005, 's', "joint states stamped further in the future "
               "than this (against this node's clock) are refused"),
         Param('max_plan_points', 20000, '', 'plans with more points are refused'),
-        Param('max_plan_acceleration_rad_s2', 50.0, 'rad/s^2', 'plans with a faster joint '
-              'acceleration are refused'),
-        Param('plan_torque_fraction', 0.9, '', 'plans whose feed-forward torque needs more '
-              'than this fraction of a torque limit are refused'),
+        Param('max_plan_acceleration_rad_s2', _g.max_acceleration, 'rad/s^2', 'plans with a '
+              'faster joint acceleration are refused'),
+        Param('plan_torque_fraction', _g.torque_fraction, '', 'plans whose feed-forward '
+              'torque needs more than this fraction of a torque limit are refused'),
         Param('max_ramp_s', 10.0, 's', 'enable is refused when the ramp to the start would '
               'take longer'),
         Param('require_axis_status', True, '', 'enable only once the simulator or axis '
@@ -190,6 +195,8 @@ class PdPlusNode(Node):
         tl = P['torque_limit_nm']
         cfg = ControllerConfig(
             kp=tuple(P['kp']), kd=tuple(P['kd']), period_s=P['period_s'],
+            gain_design_inertia_kg_m2=(tuple(P['gain_design_inertia_kg_m2'])
+                                       if len(P['gain_design_inertia_kg_m2']) else None),
             prediction_samples=P['prediction_samples'],
             delay_prediction=P['delay_prediction'],
             ramp_min_duration_s=P['ramp_min_duration_s'],

@@ -30,6 +30,7 @@ import threading
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from irb_description.trajectory_rules import GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION
 
 _HEADER = struct.Struct('<I')
 
@@ -50,8 +51,9 @@ class GateConfig:
     min_theta_dot: float = 0.05
     velocity_limit_fraction: float = 1.0
     max_points: int = 20000
-    max_acceleration: float = 50.0
-    torque_fraction: float = 0.9
+    # the defaults are the planners' rule too (irb_description.trajectory_rules): one source
+    max_acceleration: float = GATE_MAX_ACCELERATION_RAD_S2
+    torque_fraction: float = GATE_TORQUE_FRACTION
     friction_mode: str = 'nominal'
     friction_map_file: str = ''
     joints: int = 3                   # 6: the six-joint model (pdplus joints:=6)

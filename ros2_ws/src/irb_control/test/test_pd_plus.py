@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 
 from irb_control.pd_plus import (MODE_HOLD, MODE_IDLE, MODE_PATH, MODE_RAMP, MODE_STOPPED,
                                  MODE_TIME, ControllerConfig, PdPlusController, Watchdog,
-                                 friction_blend, quintic_ramp, ramp_duration)
+                                 friction_blend, gain_scale, quintic_ramp, ramp_duration)
 from irb_control.profiles import (PathProfile, ProfileError, default_circle_profile,
                                   sine_trajectory)
 
@@ -65,7 +65,9 @@ def test_torque_equals_inverse_dynamics_when_errors_are_zero(model, circle, prof
         assert_allclose(out.q_error, 0.0, atol=1e-5)
         expected = (model.inverse_dynamics(q, qd, out.qdd_ref)
                     + model.friction.torque(qd))
-        tau_fb = ctrl.kp * out.q_error + ctrl.kd * out.qd_error
+        # inertia-scheduled gains (no prediction here: M at the measured q)
+        sc = gain_scale(np.diag(model.mass_matrix(q)), ctrl.config.gain_design_inertia_kg_m2)
+        tau_fb = sc * (ctrl.kp * out.q_error + ctrl.kd * out.qd_error)
         # theta from FK(IK(p)) is exact to ~1e-9 rad, hence 1e-4 N m
         assert_allclose(out.tau_model + out.tau_friction, expected, rtol=1e-9, atol=1e-4)
         assert_allclose(out.tau, expected + tau_fb, atol=1e-4)

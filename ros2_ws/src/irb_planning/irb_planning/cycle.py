@@ -43,10 +43,14 @@ import yaml
 
 from irb_description.params import yaml_problem
 from irb_description.power_modes import HOLD, MODES, PowerModes
+from irb_description.trajectory_rules import (GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION,
+                                              gate_limit_notes)
 
 OP_MOTION, OP_FIXED, OP_WAIT = 'motion', 'fixed', 'wait'
 OP_KINDS = (OP_MOTION, OP_FIXED, OP_WAIT)
 CACHE_VERSION = 1
+#: re-plans of a front point at tighter limits when pdplus's plan gate would refuse it
+GATE_RETRIES = 3
 
 
 class CycleError(ValueError):
@@ -549,6 +553,26 @@ def plan_request(op: Operation, duration: float, objective: str, energy_model: s
     return PlanRequest(**kw)
 
 
+def gate_check(model, traj: dict) -> tuple[list, float]:
+    """pdplus's plan-gate rules on a plan's message points (irb_description.trajectory_rules:
+    |qdd| <= GATE_MAX_ACCELERATION_RAD_S2, feed-forward torque <= GATE_TORQUE_FRACTION of
+    the model's torque limits), the feed-forward computed as the gate does: the model's
+    inverse dynamics plus its nominal friction (pdplus's default compensation) at q, qd,
+    qdd. (one line per broken rule, factor < 1 on the limit scaling that should clear them;
+    1.0 when none is broken)."""
+    q, qd, qdd = (np.asarray(traj[k], float) for k in ('q', 'qd', 'qdd'))
+    tau = np.array([model.inverse_dynamics(q[k], qd[k], qdd[k]) for k in range(len(q))])
+    tau = tau + model.friction.torque(qd)
+    lim = np.asarray(model.limits.torque, float)
+    notes = gate_limit_notes(qdd, tau, lim, GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION)
+    if not notes:
+        return [], 1.0
+    share = float(np.max(np.abs(tau) / lim[None, :]))
+    acc = float(np.max(np.abs(qdd)))
+    factor = min(1.0, GATE_TORQUE_FRACTION / share, GATE_MAX_ACCELERATION_RAD_S2 / acc)
+    return notes, 0.98 * factor
+
+
 def _point_record(result, bus: str, electrical) -> dict:
     ver = result.verification
     tr = result.trajectory
@@ -559,6 +583,7 @@ def _point_record(result, bus: str, electrical) -> dict:
             'mechanical_j': float(ver.energy), 'min_duration_s': float(result.min_duration),
             'q_start': np.asarray(tr['q'][0], float).tolist(),
             'q_end': np.asarray(tr['q'][-1], float).tolist(),
+            'limit_scaling': float(result.request.limit_scaling or 1.0),
             'power_t': t[idx].tolist(), 'power_w': p[idx].tolist(),
             'trajectory': {k: np.asarray(tr[k], float).tolist()
                            for k in ('t', 'theta', 'q', 'qd', 'qdd', 'tau') if k in tr}}
@@ -604,6 +629,8 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                        # the smoothness limits (issue 28) change every front
                        'smooth': [s.jerk_limits, list(s.joint_jerk_limit_rad_s3),
                                   s.tcp_jerk_limit_m_s3, list(s.torque_rate_limit_nm_s)],
+                       # pdplus's plan gate: its points are re-planned until it accepts them
+                       'gate': [GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION],
                        # only when set: the caches of plans at the full limits stay valid
                        **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
                       sort_keys=True, default=str)
@@ -640,17 +667,32 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
             tmp.replace(cfile)
 
     def run(duration, objective):
+        # a plan pdplus's gate would refuse is planned again at tighter limits (the same
+        # duration; the time-optimal one at the limits the gate accepts: baseline A is as
+        # fast as the controller allows), up to GATE_RETRIES times
         t0 = time.perf_counter()
-        try:
-            r = planner.plan(plan_request(op, duration, objective, energy_model, grid,
-                                          spec.friction_map, spec.limit_scaling))
-        except PlanError as exc:
-            if exc.code in (ERROR_INFEASIBLE_DURATION, ERROR_SOLVER) and objective != 'time':
-                return None, f'code {exc.code}: {exc.message}', time.perf_counter() - t0
-            raise CycleError(f'motion {op.name}: the planner refused the {objective} plan'
-                             f'{f" at {duration:g} s" if duration else ""} (code {exc.code}):'
-                             f' {exc.message}') from None
-        return _point_record(r, bus, planner.electrical), '', time.perf_counter() - t0
+        scaling = spec.limit_scaling or 1.0
+        for _ in range(GATE_RETRIES + 1):
+            try:
+                r = planner.plan(plan_request(op, duration, objective, energy_model, grid,
+                                              spec.friction_map, scaling))
+            except PlanError as exc:
+                if exc.code in (ERROR_INFEASIBLE_DURATION, ERROR_SOLVER) and \
+                        objective != 'time':
+                    return None, f'code {exc.code}: {exc.message}', time.perf_counter() - t0
+                raise CycleError(f'motion {op.name}: the planner refused the {objective} '
+                                 f'plan{f" at {duration:g} s" if duration else ""} at limit '
+                                 f'scaling {scaling:.3g} (code {exc.code}): '
+                                 f'{exc.message}') from None
+            rec = _point_record(r, bus, planner.electrical)
+            notes, factor = gate_check(planner.model, rec['trajectory'])
+            if not notes:
+                return rec, '', time.perf_counter() - t0
+            scaling *= factor
+        why = f"pdplus's plan gate refuses it at limit scaling {scaling / factor:.3g}: {notes[0]}"
+        if objective == 'time':
+            raise CycleError(f'motion {op.name}: the time-optimal plan: {why}')
+        return None, why, time.perf_counter() - t0
     if cached_only:
         if 'fastest' not in cache:
             return None

@@ -280,3 +280,29 @@ def test_unreachable_and_broken_chains_are_refused_before_planning():
                                  'waypoints': [[0.6, 0.1, 0.31], [0.6, 0, 0.3]]}}]})
     with pytest.raises(CycleError, match='motion b starts at'):
         check_continuity(gap)
+
+
+def test_a_plan_pdplus_gate_would_refuse_is_not_kept(tmp_path, monkeypatch, capsys):
+    """cycle.gate_check applies pdplus's plan-gate rules (irb_description.trajectory_rules)
+    to every plan: with a gate taking at most 12 rad/s^2 the time-optimal move to the part
+    exchange pose (12.7 rad/s^2 near its end, set by the jerk limits, grid 30) is refused
+    after the re-plans at tighter limits, in one line naming the rule. (That the kept plans
+    pass pdplus's own gate: irb_bringup test_cross_package_plans.)"""
+    from irb_planning import cycle
+    from irb_planning.cycle_cli import main
+    line = {'type': 'line', 'waypoints': [[0.7, -0.09950371902099892, 0.3099503719020999],
+                                          [0.45, -0.45, 0.45]]}
+    cyc = {'takt_s': 4.0, 'grid_size': 30,
+           'operations': [{'motion': 'to_exchange', 'path': line, 'durations_s': [0.7]},
+                          {'wait': 'idle'},
+                          {'motion': 'back', 'path': {'type': 'line', 'waypoints':
+                                                      line['waypoints'][::-1]},
+                           'durations_s': [0.7]}]}
+    f = tmp_path / 'c.yaml'
+    f.write_text(yaml.safe_dump(cyc))
+    monkeypatch.setattr(cycle, 'GATE_MAX_ACCELERATION_RAD_S2', 12.0)
+    assert main(['--cycle', str(f), '--out', str(tmp_path / 'out'), '--no-plots',
+                 '--cache', str(tmp_path / 'fronts')]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "pdplus's plan gate refuses it" in err and 'limiting it to 12' in err
+    assert '\n' not in err
