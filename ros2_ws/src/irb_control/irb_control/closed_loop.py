@@ -216,7 +216,8 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
 
 def six_axis_controller_config(path: str | Path | None = None, **overrides) -> ControllerConfig:
     """ControllerConfig of six joints: the per-joint settings of config/pdplus_six_axis.yaml
-    (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad), the
+    (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad, ki,
+    integral_limit_nm), the
     rest ControllerConfig's defaults (= config/pdplus.yaml), then ``overrides``."""
     import yaml
 
@@ -224,8 +225,11 @@ def six_axis_controller_config(path: str | Path | None = None, **overrides) -> C
     p = Path(path) if path else config_path('pdplus_six_axis.yaml')
     block = yaml.safe_load(p.read_text())['pdplus']['ros__parameters']
     keys = ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad')
-    return ControllerConfig(**{k: tuple(float(x) for x in block[k]) for k in keys},
-                            **overrides)
+    vals = {k: tuple(float(x) for x in block[k]) for k in keys}
+    for k in ('ki', 'integral_limit_nm'):       # integral action, when the file has it
+        if block.get(k):
+            vals[k] = tuple(float(x) for x in block[k])
+    return ControllerConfig(**{**vals, **overrides})
 
 
 def build_six_joint(profile, path: PathBase, tcp=None, friction_mode: str = 'nominal',

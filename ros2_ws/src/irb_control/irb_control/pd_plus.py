@@ -220,6 +220,14 @@ class ControllerConfig:
     #: flight), 'reference' (the reference acceleration at t + Delta, the thesis's rule), or
     #: 'auto' = 'reference' on the thesis's CirclePath, 'commanded' on every other path
     delay_prediction: str = 'auto'
+    #: integral action (n joints, ``_step_n`` only; None = none, the thesis's PD+): per joint
+    #: Ki [N m/(rad s)] on the predicted position error, its torque clamped to
+    #: +-integral_limit_nm [N m] and not integrated while the command is limited in the
+    #: error's direction (anti-windup); zero in IDLE/STOPPED, reset by enable, stop, motors
+    #: off/on. For the wrist's stiction: a creeping joint that sticks off its reference is
+    #: pushed through the breakaway by the integral instead of waiting for Kp e.
+    ki: tuple | None = None                       # [N m/(rad s)]
+    integral_limit_nm: tuple | None = None        # [N m]
 
     @property
     def joints(self) -> int:
@@ -236,6 +244,15 @@ class ControllerConfig:
             v = np.asarray(self.torque_limit_nm, float)
             if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError(f'torque_limit_nm must be {n} finite numbers > 0')
+        for name in ('ki', 'integral_limit_nm'):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            v = np.asarray(v, float)
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'{name} must be {n} finite numbers >= 0, got {v}')
+        if (self.ki is None) != (self.integral_limit_nm is None):
+            raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
             raise ValueError(f'delay_prediction must be one of {DELAY_PREDICTIONS}, got '
                              f'{self.delay_prediction!r}')
@@ -357,6 +374,11 @@ class PdPlusController:
         c = config
         self.kp = np.asarray(c.kp, float)
         self.kd = np.asarray(c.kd, float)
+        # integral action (ControllerConfig.ki): gains, clamp, the integral torque [N m]
+        self._ki = None if c.ki is None else np.asarray(c.ki, float).tolist()
+        self._i_lim = None if c.ki is None else np.asarray(c.integral_limit_nm,
+                                                           float).tolist()
+        self._integral = [0.0] * n
         lim = self.model.limits
         self.tau_max = lim.torque.copy() if c.torque_limit_nm is None else np.asarray(
             c.torque_limit_nm, float)
@@ -470,6 +492,7 @@ class PdPlusController:
         self._enable_requested = True
         self._halt_T = self._halt = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
         return True, f'enabled: {why}'
@@ -485,6 +508,7 @@ class PdPlusController:
         self._halt_T = self._halt = None
         self._prev_tau = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
 
     def hold(self) -> tuple[bool, str]:
         """Controlled stop (the ``hold`` event): a moving reference (ramp, path, time)
@@ -530,6 +554,7 @@ class PdPlusController:
             self._halt_T = self._halt = None
             self._prev_tau = None
             self._in_flight.clear()
+            self._integral = [0.0] * self.n
         return True, why
 
     def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
@@ -542,6 +567,7 @@ class PdPlusController:
         self._hold = np.asarray(q, float).tolist()
         self._prev_tau = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
         return True, why
 
     @property
@@ -567,7 +593,7 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
-        if self.n != 3:
+        if self.n != 3 or self._ki is not None:
             return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -924,6 +950,13 @@ class PdPlusController:
             tf = zero
         kp, kd = self.kp.tolist(), self.kd.tolist()
         fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
+        ki = self._ki
+        if ki is not None:      # integral action: candidate, bounded to +-limit
+            i_old = self._integral
+            T = self.config.period_s
+            lim = self._i_lim
+            i_new = [min(max(i_old[i] + ki[i] * e[i] * T, -lim[i]), lim[i]) for i in R]
+            fb = [fb[i] + i_new[i] for i in R]
         tau = [tm[i] + tf[i] + fb[i] for i in R]
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
@@ -936,7 +969,15 @@ class PdPlusController:
             x = tau[i]
             if prev is not None:
                 x = min(max(x, prev[i] - r[i]), prev[i] + r[i])
-            tau[i] = min(max(x, -tmax[i]), tmax[i])
+            x = min(max(x, -tmax[i]), tmax[i])
+            if ki is not None and x != tau[i] and (x - tau[i]) * e[i] < 0.0:
+                # anti-windup: the command is limited in the error's direction, the
+                # integral keeps its previous value (the torque is the limited one anyway)
+                fb[i] -= i_new[i] - i_old[i]
+                i_new[i] = i_old[i]
+            tau[i] = x
+        if ki is not None:
+            self._integral = i_new
         tau_a = np.array(tau)
         self._prev_tau = tau_a
         self._last_qd_ref = qd_ref
