@@ -217,7 +217,7 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
 def six_axis_controller_config(path: str | Path | None = None, **overrides) -> ControllerConfig:
     """ControllerConfig of six joints: the per-joint settings of config/pdplus_six_axis.yaml
     (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad, ki,
-    integral_limit_nm), the
+    integral_limit_nm, stribeck_measured), the
     rest ControllerConfig's defaults (= config/pdplus.yaml), then ``overrides``."""
     import yaml
 
@@ -229,6 +229,8 @@ def six_axis_controller_config(path: str | Path | None = None, **overrides) -> C
     for k in ('ki', 'integral_limit_nm'):       # integral action, when the file has it
         if block.get(k):
             vals[k] = tuple(float(x) for x in block[k])
+    if block.get('stribeck_measured'):
+        vals['stribeck_measured'] = tuple(bool(x) for x in block['stribeck_measured'])
     return ControllerConfig(**{**vals, **overrides})
 
 

@@ -228,6 +228,12 @@ class ControllerConfig:
     #: pushed through the breakaway by the integral instead of waiting for Kp e.
     ki: tuple | None = None                       # [N m/(rad s)]
     integral_limit_nm: tuple | None = None        # [N m]
+    #: per joint, where the friction feed-forward's Stribeck hump (F_s - F_c) exp(-(v/v_s)^2)
+    #: takes its speed: False = v of eq. 4.9 as the rest of the map (the thesis), True = the
+    #: predicted measured speed (``_step_n`` only): the breakaway torque while the joint
+    #: sticks, Coulomb as soon as it slides, as the friction itself (for creeping joints);
+    #: None = False on every joint
+    stribeck_measured: tuple | None = None
 
     @property
     def joints(self) -> int:
@@ -251,6 +257,11 @@ class ControllerConfig:
             v = np.asarray(v, float)
             if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
                 raise ValueError(f'{name} must be {n} finite numbers >= 0, got {v}')
+        if self.stribeck_measured is not None and (
+                len(self.stribeck_measured) != n
+                or any(not isinstance(x, (bool, np.bool_)) for x in self.stribeck_measured)):
+            raise ValueError(f'stribeck_measured must be {n} booleans, got '
+                             f'{self.stribeck_measured}')
         if (self.ki is None) != (self.integral_limit_nm is None):
             raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
@@ -379,6 +390,9 @@ class PdPlusController:
         self._i_lim = None if c.ki is None else np.asarray(c.integral_limit_nm,
                                                            float).tolist()
         self._integral = [0.0] * n
+        self._hump_measured = (None if c.stribeck_measured is None
+                               or not any(c.stribeck_measured)
+                               else [bool(x) for x in c.stribeck_measured])
         lim = self.model.limits
         self.tau_max = lim.torque.copy() if c.torque_limit_nm is None else np.asarray(
             c.torque_limit_nm, float)
@@ -416,6 +430,10 @@ class PdPlusController:
         self._pending_tracker = None
         self._use_path(path)
         self._friction_par = _parametric_friction(friction)
+        if self._hump_measured is not None and friction is not None \
+                and self._friction_par is None:
+            raise ValueError('stribeck_measured needs a parametric friction map (no '
+                             'polynomials)')
         n, T = c.prediction_samples, c.period_s
         # over [t, t + n T) the command j (0 = oldest) acts during [t + j T, t + (j + 1) T):
         # qd(t + Delta) = qd + T sum a_j, q(t + Delta) = q + Delta qd + T^2 sum (n - j - 1/2) a_j
@@ -593,7 +611,7 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
-        if self.n != 3 or self._ki is not None:
+        if self.n != 3 or self._ki is not None or self._hump_measured:
             return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -1019,14 +1037,16 @@ class PdPlusController:
         alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
         v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
         par = self._friction_par
-        if par is None:
+        measured = self._hump_measured or [False] * n
+        if par is None:     # (stribeck_measured is refused with such maps at construction)
             return self.friction.torque(np.array(v)).tolist()
         out = []
         exp = np.exp
         for i in range(n):
             fcp, fcn, hp, hn, vs, fv, off = par[i]
             x = v[i]
-            e = float(exp(-((x / vs) ** 2)))
+            xs = qd_p[i] if measured[i] else x
+            e = float(exp(-((xs / vs) ** 2)))
             sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
             tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
             out.append(tf + off if off else tf)
