@@ -41,6 +41,8 @@ def parse(argv):
     ap.add_argument('--tcp', type=float, nargs=3, default=[0.0, 0.0, 0.1], help='[m]')
     ap.add_argument('--start', type=float, nargs=6, default=list(START), help='[rad]')
     ap.add_argument('--timeout', type=float, default=300.0, help='[s] bound of the whole run')
+    ap.add_argument('--plain-pd', action='store_true', help="without pdplus_six_axis.yaml's "
+                    'integral and measured-speed Stribeck term')
     ap.add_argument('--out', default='six_joint_nodes', help="results/<out>.json ('' = none)")
     return ap.parse_args(argv)
 
@@ -85,7 +87,7 @@ def measure(js_t, js_q, cs_t, cs_mode, path_file: str, tcp_xyz) -> dict:
 
 
 def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
-        start=START, timeout: float = 300.0, log=print) -> dict:
+        start=START, timeout: float = 300.0, log=print, plain_pd: bool = False) -> dict:
     """The sequence on the nodes (module docstring); the figures and how the run went."""
     import subprocess
     import tempfile
@@ -116,6 +118,10 @@ def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
     merged = {}
     for name in ('pdplus.yaml', 'pdplus_six_axis.yaml'):
         merged.update(yaml.safe_load(config_path(name).read_text())['pdplus']['ros__parameters'])
+    if plain_pd:
+        for k in ('ki', 'integral_limit_nm', 'stribeck_measured'):
+            merged.pop(k, None)
+    out['pdplus_parameters'] = merged
     params = tempfile.NamedTemporaryFile('w', suffix='.yaml', delete=False)
     yaml.safe_dump({'/**': {'ros__parameters': merged}}, params)
     params.close()
@@ -218,7 +224,7 @@ def main(argv=None):
     if not a.path_file:
         from irb_planning.six_axis_plan import config_path
         a.path_file = str(config_path().parent / 'path6_rectangle.yaml')
-    out = run(a.path_file, a.duration, a.grid, a.tcp, a.start, a.timeout)
+    out = run(a.path_file, a.duration, a.grid, a.tcp, a.start, a.timeout, plain_pd=a.plain_pd)
     print(json.dumps(out, indent=1))
     if a.out:
         RESULTS.mkdir(exist_ok=True)
