@@ -44,6 +44,9 @@ def parse(argv):
     ap.add_argument('--repeats', type=int, default=3, help='interleaved step-cost runs each')
     ap.add_argument('--energy', action='store_true', help='also the energy-optimal plan')
     ap.add_argument('--out', default='six_joint', help='results/<out>.json')
+    ap.add_argument('--plain-pd', action='store_true',
+                    help="tracking without config/pdplus_six_axis.yaml's wrist stiction "
+                         'measures (no integral, Stribeck term on the reference blend)')
     return ap.parse_args(argv)
 
 
@@ -59,11 +62,17 @@ def main(argv=None):
     from irb_planning.six_axis_plan import SixAxisPlanner, config_path, task_from_spec
     from irb_planning.verify import DHTable, PathCurve
 
-    from irb_control.closed_loop import (build_default, build_six_joint, simulate_closed_loop)
+    from irb_control.closed_loop import (build_default, build_six_joint, simulate_closed_loop,
+                                         six_axis_controller_config)
     from irb_control.plant import PlantConfig
     from irb_control.profiles import default_circle_profile, profile_from_joint_trajectory
 
-    out = {'load_average_before': os.getloadavg(), 'speed_m_s': SPEED}
+    out = {'load_average_before': os.getloadavg(), 'speed_m_s': SPEED,
+           'controller': 'plain PD+' if a.plain_pd else 'config/pdplus_six_axis.yaml'}
+    cc = (six_axis_controller_config(ki=None, integral_limit_nm=None, stribeck_measured=None)
+          if a.plain_pd else six_axis_controller_config())
+    out['controller_config'] = {k: getattr(cc, k) for k in (
+        'kp', 'kd', 'ki', 'integral_limit_nm', 'stribeck_measured')}
     spec_file = config_path().parent / 'path6_rectangle.yaml'
     path, law = task_from_spec(read_path_spec(str(spec_file)))
     t0 = time.perf_counter()
@@ -110,7 +119,7 @@ def main(argv=None):
         for mode in ('file', 'nominal'):
             for seed in a.seeds:
                 plant, ctrl = build_six_joint(
-                    prof, path, tcp, friction_mode=mode, model=six,
+                    prof, path, tcp, friction_mode=mode, model=six, controller_config=cc,
                     plant_config=PlantConfig(initial_q=tuple(prof.q[0].tolist()), seed=seed))
                 r = simulate_closed_loop(plant, ctrl, float(tr['t'][-1]) + 1.5)
                 row = {'plan': name, 'friction_ff': mode, 'seed': seed,

@@ -216,7 +216,8 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
 
 def six_axis_controller_config(path: str | Path | None = None, **overrides) -> ControllerConfig:
     """ControllerConfig of six joints: the per-joint settings of config/pdplus_six_axis.yaml
-    (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad), the
+    (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad, ki,
+    integral_limit_nm, stribeck_measured), the
     rest ControllerConfig's defaults (= config/pdplus.yaml), then ``overrides``."""
     import yaml
 
@@ -224,10 +225,15 @@ def six_axis_controller_config(path: str | Path | None = None, **overrides) -> C
     p = Path(path) if path else config_path('pdplus_six_axis.yaml')
     block = yaml.safe_load(p.read_text())['pdplus']['ros__parameters']
     keys = ('kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad')
-    kw = {k: tuple(float(x) for x in block[k]) for k in keys}
+    vals = {k: tuple(float(x) for x in block[k]) for k in keys}
     design = block.get('gain_design_inertia_kg_m2', [])
-    kw['gain_design_inertia_kg_m2'] = tuple(float(x) for x in design) if design else None
-    return ControllerConfig(**{**kw, **overrides})
+    vals['gain_design_inertia_kg_m2'] = tuple(float(x) for x in design) if design else None
+    for k in ('ki', 'integral_limit_nm'):       # integral action, when the file has it
+        if block.get(k):
+            vals[k] = tuple(float(x) for x in block[k])
+    if block.get('stribeck_measured'):
+        vals['stribeck_measured'] = tuple(bool(x) for x in block['stribeck_measured'])
+    return ControllerConfig(**{**vals, **overrides})
 
 
 def build_six_joint(profile, path: PathBase, tcp=None, friction_mode: str = 'nominal',

@@ -234,6 +234,20 @@ class ControllerConfig:
     #: flight), 'reference' (the reference acceleration at t + Delta, the thesis's rule), or
     #: 'auto' = 'reference' on the thesis's CirclePath, 'commanded' on every other path
     delay_prediction: str = 'auto'
+    #: integral action (n joints, ``_step_n`` only; None = none, the thesis's PD+): per joint
+    #: Ki [N m/(rad s)] on the predicted position error, its torque clamped to
+    #: +-integral_limit_nm [N m] and not integrated while the command is limited in the
+    #: error's direction (anti-windup); zero in IDLE/STOPPED, reset by enable, stop, motors
+    #: off/on. For the wrist's stiction: a creeping joint that sticks off its reference is
+    #: pushed through the breakaway by the integral instead of waiting for Kp e.
+    ki: tuple | None = None                       # [N m/(rad s)]
+    integral_limit_nm: tuple | None = None        # [N m]
+    #: per joint, where the friction feed-forward's Stribeck hump (F_s - F_c) exp(-(v/v_s)^2)
+    #: takes its speed: False = v of eq. 4.9 as the rest of the map (the thesis), True = the
+    #: predicted measured speed (``_step_n`` only): the breakaway torque while the joint
+    #: sticks, Coulomb as soon as it slides, as the friction itself (for creeping joints);
+    #: None = False on every joint
+    stribeck_measured: tuple | None = None
 
     @property
     def joints(self) -> int:
@@ -255,6 +269,20 @@ class ControllerConfig:
             v = np.asarray(self.torque_limit_nm, float)
             if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError(f'torque_limit_nm must be {n} finite numbers > 0')
+        for name in ('ki', 'integral_limit_nm'):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            v = np.asarray(v, float)
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'{name} must be {n} finite numbers >= 0, got {v}')
+        if self.stribeck_measured is not None and (
+                len(self.stribeck_measured) != n
+                or any(not isinstance(x, (bool, np.bool_)) for x in self.stribeck_measured)):
+            raise ValueError(f'stribeck_measured must be {n} booleans, got '
+                             f'{self.stribeck_measured}')
+        if (self.ki is None) != (self.integral_limit_nm is None):
+            raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
             raise ValueError(f'delay_prediction must be one of {DELAY_PREDICTIONS}, got '
                              f'{self.delay_prediction!r}')
@@ -378,6 +406,14 @@ class PdPlusController:
         self.kd = np.asarray(c.kd, float)
         self._m_design = (None if c.gain_design_inertia_kg_m2 is None
                           else [float(x) for x in c.gain_design_inertia_kg_m2])
+        # integral action (ControllerConfig.ki): gains, clamp, the integral torque [N m]
+        self._ki = None if c.ki is None else np.asarray(c.ki, float).tolist()
+        self._i_lim = None if c.ki is None else np.asarray(c.integral_limit_nm,
+                                                           float).tolist()
+        self._integral = [0.0] * n
+        self._hump_measured = (None if c.stribeck_measured is None
+                               or not any(c.stribeck_measured)
+                               else [bool(x) for x in c.stribeck_measured])
         lim = self.model.limits
         self.tau_max = lim.torque.copy() if c.torque_limit_nm is None else np.asarray(
             c.torque_limit_nm, float)
@@ -415,6 +451,10 @@ class PdPlusController:
         self._pending_tracker = None
         self._use_path(path)
         self._friction_par = _parametric_friction(friction)
+        if self._hump_measured is not None and friction is not None \
+                and self._friction_par is None:
+            raise ValueError('stribeck_measured needs a parametric friction map (no '
+                             'polynomials)')
         n, T = c.prediction_samples, c.period_s
         # over [t, t + n T) the command j (0 = oldest) acts during [t + j T, t + (j + 1) T):
         # qd(t + Delta) = qd + T sum a_j, q(t + Delta) = q + Delta qd + T^2 sum (n - j - 1/2) a_j
@@ -491,6 +531,7 @@ class PdPlusController:
         self._enable_requested = True
         self._halt_T = self._halt = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
         return True, f'enabled: {why}'
@@ -506,6 +547,7 @@ class PdPlusController:
         self._halt_T = self._halt = None
         self._prev_tau = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
 
     def hold(self) -> tuple[bool, str]:
         """Controlled stop (the ``hold`` event): a moving reference (ramp, path, time)
@@ -551,6 +593,7 @@ class PdPlusController:
             self._halt_T = self._halt = None
             self._prev_tau = None
             self._in_flight.clear()
+            self._integral = [0.0] * self.n
         return True, why
 
     def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
@@ -563,6 +606,7 @@ class PdPlusController:
         self._hold = np.asarray(q, float).tolist()
         self._prev_tau = None
         self._in_flight.clear()
+        self._integral = [0.0] * self.n
         return True, why
 
     @property
@@ -588,7 +632,7 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
-        if self.n != 3:
+        if self.n != 3 or self._ki is not None or self._hump_measured:
             return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -963,6 +1007,13 @@ class PdPlusController:
                     s_i = float(m_ii) / md[i]
                     kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
         fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
+        ki = self._ki
+        if ki is not None:      # integral action: candidate, bounded to +-limit
+            i_old = self._integral
+            T = self.config.period_s
+            lim = self._i_lim
+            i_new = [min(max(i_old[i] + ki[i] * e[i] * T, -lim[i]), lim[i]) for i in R]
+            fb = [fb[i] + i_new[i] for i in R]
         tau = [tm[i] + tf[i] + fb[i] for i in R]
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
@@ -975,7 +1026,15 @@ class PdPlusController:
             x = tau[i]
             if prev is not None:
                 x = min(max(x, prev[i] - r[i]), prev[i] + r[i])
-            tau[i] = min(max(x, -tmax[i]), tmax[i])
+            x = min(max(x, -tmax[i]), tmax[i])
+            if ki is not None and x != tau[i] and (x - tau[i]) * e[i] < 0.0:
+                # anti-windup: the command is limited in the error's direction, the
+                # integral keeps its previous value (the torque is the limited one anyway)
+                fb[i] -= i_new[i] - i_old[i]
+                i_new[i] = i_old[i]
+            tau[i] = x
+        if ki is not None:
+            self._integral = i_new
         tau_a = np.array(tau)
         self._prev_tau = tau_a
         self._last_qd_ref = qd_ref
@@ -1017,14 +1076,16 @@ class PdPlusController:
         alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
         v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
         par = self._friction_par
-        if par is None:
+        measured = self._hump_measured or [False] * n
+        if par is None:     # (stribeck_measured is refused with such maps at construction)
             return self.friction.torque(np.array(v)).tolist()
         out = []
         exp = np.exp
         for i in range(n):
             fcp, fcn, hp, hn, vs, fv, off = par[i]
             x = v[i]
-            e = float(exp(-((x / vs) ** 2)))
+            xs = qd_p[i] if measured[i] else x
+            e = float(exp(-((xs / vs) ** 2)))
             sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
             tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
             out.append(tf + off if off else tf)

@@ -82,6 +82,12 @@ SPEC = NodeSpec(
               'safe stop above this fraction of the speed limits'),
         Param('max_tracking_error_rad', list(_d.max_tracking_error_rad), 'rad',
               'safe stop above this joint error'),
+        Param('ki', [], 'N m/(rad s)', 'joints 6: integral gains, one per joint; [] = none '
+              '(PD+; with integral_limit_nm; doc/six_joint.md)', type='double[]'),
+        Param('integral_limit_nm', [], 'N m', 'joints 6: bound of each integral torque',
+              type='double[]'),
+        Param('stribeck_measured', [], '', 'joints 6: per joint, the feed-forward\'s Stribeck '
+              'term on the measured speed; [] = all on the reference blend', type='bool[]'),
         Param('theta_max_lead_rad', _d.theta_max_lead_rad, 'rad', 'progress governor lead; '
               '0 = theta from the measurement only (thesis)'),
         Param('reference_mode', 'theta', '', "'theta' (theta-driven) or 'time' (q(t))"),
@@ -205,7 +211,9 @@ class PdPlusNode(Node):
             torque_rate_limit_nm_s=tuple(P['torque_rate_limit_nm_s']),
             velocity_limit_fraction=P['velocity_limit_fraction'],
             max_tracking_error_rad=tuple(P['max_tracking_error_rad']),
-            theta_max_lead_rad=P['theta_max_lead_rad'])
+            theta_max_lead_rad=P['theta_max_lead_rad'],
+            ki=tuple(P['ki']) or None, integral_limit_nm=tuple(P['integral_limit_nm']) or None,
+            stribeck_measured=tuple(bool(x) for x in P['stribeck_measured']) or None)
         friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
         self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
         # profiles let go of (a plan replaced, the old motion at enable) are freed on a thread

@@ -11,12 +11,20 @@ The path file is ``plan --path-file``'s mapping plus an ``orientation`` block
 time-optimal duration, energy, peak torques and speeds of the six joints) and its played check
 (quintic per joint at 10 kHz, own DH kinematics: position and orientation error). Exit 0
 planned, 1 refused (unreachable, too short, fails the check), 2 bad arguments or path file.
+
+``--publish``: hands the plan to pdplus (``joints:=6``) as the planner node does: a latched
+``trajectory_msgs/JointTrajectory`` of joint_1..6 (positions, velocities, accelerations at the
+checked points) on ``/planned_trajectory``, the path file's mapping (its orientation block
+included) in ``header.frame_id`` (``irb_description.plan_path``); then waits for pdplus's
+verdict on ``/pdplus/plan_status`` as ``plan`` does (exit 3 refused, 4 no verdict). The plan
+starts on ``ros2 service call /pdplus/enable std_srvs/srv/Trigger``.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+import time
 
 MIN_GRID, MAX_GRID = 20, 1000      # theta nodes (as the three-axis planner's requests)
 EXAMPLE = 'ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8 --json plan6.json'
@@ -37,7 +45,73 @@ def parse_args(argv):
     p.add_argument('--tcp', type=float, nargs=3, default=None, metavar=('X', 'Y', 'Z'),
                    help='[m] TCP offset on tool0 (default: config/six_axis_plan.yaml tcp)')
     p.add_argument('--json', default='', help="write the plan and its points here ('' = no)")
+    p.add_argument('--publish', action='store_true',
+                   help='publish the plan on /planned_trajectory (latched) for pdplus '
+                        'joints:=6 and wait for its verdict')
+    p.add_argument('--verdict-timeout', type=float, default=30.0,
+                   help='[s] --publish: wait this long for the verdict (0 = do not wait)')
+    p.add_argument('--plan-status', default='pdplus/plan_status',
+                   help="--publish: the controller's PlanStatus topic ('' = every one)")
     return p.parse_args(argv)
+
+
+def trajectory_message(points: dict, joint_names, spec: dict, stamp):
+    """The plan as pdplus takes it: JointTrajectory of the six joints at the checked points
+    (t [s], q, qd, qdd (N, 6)), the path mapping ``spec`` in header.frame_id, ``stamp`` (the
+    plan's identity for the verdict)."""
+    from irb_description.plan_path import path_frame_id
+    from irb_description.stamps import sec_nanosec
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    msg = JointTrajectory(joint_names=list(joint_names))
+    msg.header.stamp = stamp
+    msg.header.frame_id = path_frame_id(spec)
+    for k, t in enumerate(points['t']):
+        sec, nsec = sec_nanosec(float(t))
+        msg.points.append(JointTrajectoryPoint(
+            positions=[float(x) for x in points['q'][k]],
+            velocities=[float(x) for x in points['qd'][k]],
+            accelerations=[float(x) for x in points['qdd'][k]],
+            time_from_start=Duration(sec=sec, nanosec=nsec)))
+    return msg
+
+
+def publish(points: dict, joint_names, spec: dict, a) -> int:
+    """Publish the plan (latched) and wait for the controller's verdict (``plan``'s rule)."""
+    import rclpy
+    from irb_description.node_main import latched_qos, refuse_insecure_start
+    from rclpy.executors import SingleThreadedExecutor
+    from trajectory_msgs.msg import JointTrajectory
+
+    from .plan_cli import wait_for_verdict
+    refuse_insecure_start()
+    rclpy.init(args=['plan6', *a.ros_args])
+    node = rclpy.create_node('plan6')
+    try:
+        pub = node.create_publisher(JointTrajectory, 'planned_trajectory', latched_qos())
+        msg = trajectory_message(points, joint_names, spec, node.get_clock().now().to_msg())
+        pub.publish(msg)
+        print(f'published {len(msg.points)} points on {pub.topic_name}', flush=True)
+        if a.verdict_timeout <= 0:
+            ex = SingleThreadedExecutor()       # give late joiners a moment on the latch
+            ex.add_node(node)
+            ex.spin_once(timeout_sec=0.5)
+            ex.shutdown()
+            return 0
+        only = node.resolve_topic_name(a.plan_status) if a.plan_status else ''
+        if only:        # a controller named: give discovery time to find its status topic
+            ex = SingleThreadedExecutor()
+            ex.add_node(node)
+            until = time.monotonic() + min(a.verdict_timeout, 10.0)
+            while node.count_publishers(only) == 0 and time.monotonic() < until:
+                ex.spin_once(timeout_sec=0.1)
+            ex.shutdown()
+        return wait_for_verdict(msg.header.stamp, a.verdict_timeout, only=only)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
 
 
 def summary(plan, limits) -> str:
@@ -64,7 +138,15 @@ def summary(plan, limits) -> str:
 
 
 def main(args=None):
-    a = parse_args(sys.argv[1:] if args is None else args)
+    argv = sys.argv[1:] if args is None else list(args)
+    # ROS arguments (--ros-args ... [--]) are rclpy's (e.g. -r __ns:=/x for --publish)
+    ros_args = []
+    if '--ros-args' in argv:
+        i = argv.index('--ros-args')
+        j = argv.index('--', i) if '--' in argv[i:] else len(argv)
+        argv, ros_args = argv[:i] + argv[j + 1:], argv[i:j]
+    a = parse_args(argv)
+    a.ros_args = ros_args
     if a.objective == 'energy' and not (a.duration > 0 and a.duration < float('inf')):
         print('plan6: an energy plan needs a finite --duration > 0 [s]', file=sys.stderr)
         return 2
@@ -80,6 +162,8 @@ def main(args=None):
     from .six_axis_plan import SixAxisPlanError, SixAxisPlanner, read_task_file
     try:
         path, law = read_task_file(a.path_file)
+        from irb_description.path import read_path_spec
+        spec = read_path_spec(a.path_file) if a.publish else None
     except SixAxisPlanError as exc:
         print(f'plan6: {exc}', file=sys.stderr)
         return 2
@@ -117,6 +201,8 @@ def main(args=None):
             print(f'plan6: cannot write {a.json}: {exc.strerror}', file=sys.stderr)
             return 2
         print(f'written {a.json}')
+    if a.publish:
+        return publish(plan.trajectory, planner.kin.joint_names, spec, a)
     return 0
 
 

@@ -20,9 +20,9 @@ law (``profile.ThetaProfile``), and a smaller limit adaptation.
 Model constants come from irb_description: position and speed limits of the six joints
 (config/kinematics.yaml), torque limits (config/dynamics.yaml ``torque_limit_nm``; joints 4-6
 are its stated assumptions), friction of joints 1-3 (dynamics.yaml ``friction``). Friction of
-joints 4-6 is published nowhere and not in irb_description yet: the assumption and its
-reasoning are in this package's config/six_axis_plan.yaml (used only while dynamics.yaml has
-three joints of friction).
+joints 4-6 is published nowhere: irb_description's dynamics.yaml ``wrist_friction`` holds the
+assumption and its reasoning (``six_axis_model.nominal_six_joint_friction``), used while
+dynamics.yaml's ``friction`` has three joints.
 
 A path mapping for six axes is ``path_from_spec``'s with an ``orientation`` block
 (``orientation_from_spec``: law fixed / path_normal / slerp); the three-axis readers refuse that
@@ -45,6 +45,7 @@ from irb_description.orientation import (ORIENTATION_KEY, OrientationLaw, joint_
 from irb_description.params import load_dynamics, load_kinematics
 from irb_description.path import PROCESS_KEY, JointPath, PathBase, path_from_spec
 from irb_description.six_axis import SixAxisKinematics, UnreachablePoseError, pose, rpy_matrix
+from irb_description.six_axis_model import nominal_six_joint_friction
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, worst_inconsistency)
 
@@ -94,8 +95,9 @@ class SixAxisLimits:
 
 
 def load_limits(config: dict | None = None) -> SixAxisLimits:
-    """The six joints' limits and friction (module docstring: sources)."""
-    cfg = config or load_config()
+    """The six joints' limits and friction (module docstring: sources); every value comes from
+    irb_description (``config``, the planner's settings, holds none of them: kept for
+    callers)."""
     k, d = load_kinematics(), load_dynamics()
     names = list(k.joint_names)
     block = d.friction
@@ -110,9 +112,10 @@ def load_limits(config: dict | None = None) -> SixAxisLimits:
     joints = [joint(i, block) for i in range(n_desc)]
     wrist_src = 'irb_description config/dynamics.yaml friction'
     if n_desc < 6:
-        w = cfg['wrist_friction']
-        joints += [joint(i, w) for i in range(6 - n_desc)]
-        wrist_src = f'assumption, irb_planning config/{CONFIG_NAME} wrist_friction'
+        # joints 4-6: irb_description's wrist_friction block (its stated assumption), the one
+        # source the simulator's and pdplus's six-joint mode read too
+        joints += list(nominal_six_joint_friction().joints[n_desc:])
+        wrist_src = 'assumption, irb_description config/dynamics.yaml wrist_friction'
     if len(joints) != 6:
         raise ValueError(f'friction for {len(joints)} joints, expected 6')
     fm = FrictionMap(tuple(names), tuple(joints), 'nominal six-axis')

@@ -143,3 +143,37 @@ def test_plan6_refuses_an_unreachable_path(tmp_path, capsys):
     assert main(['--path-file', str(far), '--duration', '2']) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and 'unreachable' in err and 'workspace' in err, err
+
+
+def test_wrist_friction_one_source(planned):
+    """The planner's friction of joints 4-6 is irb_description dynamics.yaml's
+    ``wrist_friction`` (read here from the file itself), its own config holds no copy, and a
+    plan with the map built here equals the planner's to the bit (plans unchanged)."""
+    import dataclasses
+
+    import yaml
+    from irb_description.friction import FrictionMap, JointFriction
+    from irb_description.params import config_path
+
+    from irb_planning.six_axis_plan import load_config
+    planner, path, law, plan, _ = planned
+    assert 'wrist_friction' not in load_config()
+    with open(config_path('dynamics.yaml'), encoding='utf-8') as f:
+        raw = yaml.safe_load(f)
+    w = raw['wrist_friction']
+    fm = planner.limits.friction
+    for i, j in enumerate(fm.joints[3:]):
+        assert (j.coulomb, j.static, j.stribeck_velocity, j.viscous) == (
+            w['coulomb_nm'][i], w['static_nm'][i], w['stribeck_velocity_rad_s'][i],
+            w['viscous_nms_rad'][i])
+    own = [JointFriction(coulomb=float(w['coulomb_nm'][i]), static=float(w['static_nm'][i]),
+                         stribeck_velocity=float(w['stribeck_velocity_rad_s'][i]),
+                         viscous=float(w['viscous_nms_rad'][i]),
+                         valid_range=tuple(float(x) for x in w['valid_range_rad_s']))
+           for i in range(3)]
+    limits = dataclasses.replace(planner.limits, friction=FrictionMap(
+        fm.joint_names, fm.joints[:3] + tuple(own), 'built by the test'))
+    other = SixAxisPlanner(limits=limits)
+    again = other.plan(other.problem(path, law, GRID), 'energy', DURATION)
+    for k in ('t', 'q', 'qd', 'qdd'):
+        assert np.array_equal(np.asarray(again.trajectory[k]), np.asarray(plan.trajectory[k]))
