@@ -133,6 +133,7 @@ class LimitCost:
     solve_time: float
     iterations: int
     status: str
+    rest: bool = False      # rest-to-rest: the reference keeps the constant-jerk rest ends
 
     @property
     def cost(self) -> float:
@@ -147,7 +148,8 @@ class LimitCost:
                            f'{self.solve_time:.2f} s)')
         return head + (f'{100 * self.cost:+.2f} % ({self.with_limits:.6g} {unit} with them, '
                        f'{self.without_limits:.6g} {unit} without the jerk and torque-rate '
-                       f'rows, optimiser figures, extra solve {self.solve_time:.2f} s, '
+                       'rows' + (' (rest ends still at theta_ddot = 0)' if self.rest else '')
+                       + f', optimiser figures, extra solve {self.solve_time:.2f} s, '
                        f'{self.iterations} iterations)')
 
 
@@ -749,8 +751,9 @@ class Planner:
                sreq.process_key)
         with entry.lock:        # a time-optimal one: once per problem and limits
             known = entry.free_duration.get(key) if quantity == 'duration' else None
+        rest = req.boundary == BOUNDARY_REST
         if known is not None:
-            return LimitCost(quantity, have, *known)
+            return LimitCost(quantity, have, *known, rest=rest)
         free = tr.solve_without_jerk(sreq)
         st = free.stats
         if not st.success or free.profile is None:
@@ -763,7 +766,7 @@ class Planner:
         if quantity == 'duration' and np.isfinite(value):
             with entry.lock:
                 entry.free_duration[key] = out
-        return LimitCost(quantity, have, *out)
+        return LimitCost(quantity, have, *out, rest=rest)
 
     def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: PathBase,
                    fm: FrictionMap, raw_map: dict, checked: LimitSet
