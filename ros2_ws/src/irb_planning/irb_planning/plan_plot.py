@@ -74,7 +74,7 @@ def record_from_response(resp, path_msg, objective: str) -> dict:
     """The plan file's mapping of a successful PlanPath response and its request's path."""
     from .planner import limit_cost_from_message
     modes = list(resp.electrical_bus_modes)
-    cost = limit_cost_from_message(str(resp.message))
+    cost = limit_cost_from_message(str(getattr(resp, 'message', '')))
     return plan_record(
         spec_from_path_msg(path_msg), resp.trajectory, resp.theta, resp.theta_dot,
         resp.theta_ddot, objective=str(objective), duration_s=float(resp.duration),
