@@ -316,6 +316,10 @@ def main():
                     res = pl.plan(req)
                     rows.append({'type': kind, 'objective': 'energy', 'process': process,
                                  'jerk': jerk, 'plan_wall_s': time.perf_counter() - w,
+                                 # the plan's own report (limit_cost, on by default)
+                                 **({'limit_cost_reported': res.limit_cost.cost,
+                                     'limit_cost_solve_s': res.limit_cost.solve_time}
+                                    if res.limit_cost is not None else {}),
                                  **analyse(model, res, req, smooth if jerk else None,
                                            pl._blend_windows(res.profile,
                                                              request_path(req)))})

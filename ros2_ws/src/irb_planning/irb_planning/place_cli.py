@@ -236,7 +236,8 @@ def main(args=None):
     from .planner import Planner, PlannerSettings
     planner = Planner(settings=PlannerSettings(
         min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
-        play_rate_hz=PlannerSettings().evaluation_rate_hz))   # as the node's search
+        play_rate_hz=PlannerSettings().evaluation_rate_hz,    # as the node's search
+        limit_cost=False))      # the search's many plans: no cost-of-the-limits solve
     task = PlanRequest(radius=a.radius, direction=a.direction, duration=a.duration,
                        energy_model=a.energy_model, grid_size=a.grid,
                        start_angle=a.start_angle, friction_map=a.friction_map)

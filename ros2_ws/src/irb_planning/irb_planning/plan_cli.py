@@ -39,6 +39,7 @@ from irb_interfaces.srv import PlanPath
 from .costs import time_weight
 from .messages import path_msg_from_spec
 from .plan_plot import save_plan_outputs
+from .planner import limit_cost_from_message
 from .service_call import call_service
 
 
@@ -156,6 +157,9 @@ def summary(resp: PlanPath.Response) -> str:
     if resp.electrical_bus_modes:
         lines.append(f'objective energy model: {resp.energy_model or "mechanical"}; copper '
                      f'{resp.copper_energy:.1f} J, standby {resp.standby_energy:.1f} J')
+    cost = limit_cost_from_message(resp.message)
+    if cost is not None:
+        lines.append(cost['note'])
     lines += [
               f'optimiser energy {resp.optimizer_energy:.2f} J, time-optimal duration '
               f'{resp.min_duration:.3f} s, solver {resp.solver_status}, '

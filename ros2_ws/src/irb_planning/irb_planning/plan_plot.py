@@ -72,14 +72,21 @@ def plan_record(path_spec: dict, trajectory, theta, theta_dot, theta_ddot=None,
 
 def record_from_response(resp, path_msg, objective: str) -> dict:
     """The plan file's mapping of a successful PlanPath response and its request's path."""
+    from .planner import limit_cost_from_message
     modes = list(resp.electrical_bus_modes)
+    cost = limit_cost_from_message(str(getattr(resp, 'message', '')))
     return plan_record(
         spec_from_path_msg(path_msg), resp.trajectory, resp.theta, resp.theta_dot,
         resp.theta_ddot, objective=str(objective), duration_s=float(resp.duration),
         energy_j=float(resp.energy), baseline_energy_j=float(resp.baseline_energy),
         electrical_energy_j=dict(zip(modes, map(float, resp.electrical_energy))),
         baseline_electrical_energy_j=dict(zip(modes,
-                                              map(float, resp.baseline_electrical_energy))))
+                                              map(float, resp.baseline_electrical_energy))),
+        # what the smoothness limits cost this plan (None: not measured), issue 28
+        smoothness_limit_cost=None if cost is None else {
+            'quantity': cost['quantity'], 'cost_fraction': cost['cost'],
+            'with_limits': cost['with'], 'without_limits': cost['without'],
+            'note': cost['note']})
 
 
 def write_plan_file(out: str | Path, record: dict) -> Path:

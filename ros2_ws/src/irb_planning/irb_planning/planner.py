@@ -20,6 +20,7 @@ its own solves, and the model's pinocchio workspace is guarded by a lock.
 from __future__ import annotations
 
 import ctypes
+import re
 import threading
 import time
 from collections import OrderedDict
@@ -34,6 +35,7 @@ from irb_description.path import (CirclePath, JointPath, PathBase, check_joint_p
                                   joint_path, path_from_spec)
 
 from .baselines import EnergyBound, trapezoid_profile
+from .certificate import JerkCertificate, curvature, jerk_certificate
 from .evaluator import Evaluation, LimitSet, evaluate
 from .fourier import FourierProblem
 from .map_files import default_map_dirs, read_map, resolve_map_path
@@ -102,6 +104,68 @@ class PlannerSettings:
     tcp_jerk_limit_m_s3: float = 100.0
     # rigid-body torque rate; default: each joint's torque limit in 50 ms
     torque_rate_limit_nm_s: tuple = (14000.0, 18000.0, 9000.0)
+    # report what the smoothness limits cost each energy and time plan (PlanResult.limit_cost):
+    # one more solve of the same problem without the jerk rows, warm-started from the plan;
+    # off for the placement search (its many plans need no such figure)
+    limit_cost: bool = True
+
+
+#: the note that carries a plan's LimitCost (the service answer's message, plan's summary)
+LIMIT_COST_NOTE = 'cost of the smoothness limits'
+
+
+@dataclass(frozen=True)
+class LimitCost:
+    """What the smoothness limits (jerk_limits) cost one plan, issue 28: the optimiser's
+    objective figure of the plan (``with_limits``) against the same problem, request and grid
+    solved without the joint-jerk, torque-rate and TCP-jerk rows (``without_limits``; warm-
+    started from the plan, so at most the plan's figure up to the solver's tolerance; the rest
+    ends keep theta_ddot = 0 and their constant-jerk intervals, which are part of the limits
+    too: the figure leaves their share out). ``quantity``: 'energy' [J] for an energy plan
+    (the objective's energy model), 'duration' [s] for a time-optimal one. Both figures are the
+    optimiser's own quadrature (the plan's played energy is the evaluation's). ``solve_time``
+    [s] and ``iterations`` of the extra solve; ``status``: IPOPT's, without_limits NaN if it
+    failed (the plan stands)."""
+
+    quantity: str
+    with_limits: float
+    without_limits: float
+    solve_time: float
+    iterations: int
+    status: str
+    rest: bool = False      # rest-to-rest: the reference keeps the constant-jerk rest ends
+
+    @property
+    def cost(self) -> float:
+        """with / without - 1 (NaN if the reference solve failed)."""
+        return self.with_limits / self.without_limits - 1.0
+
+    def text(self) -> str:
+        unit = 'J' if self.quantity == 'energy' else 's'
+        head = f'{self.quantity} {LIMIT_COST_NOTE}: '
+        if not np.isfinite(self.without_limits):
+            return head + (f'not known (the solve without the jerk rows failed: {self.status}, '
+                           f'{self.solve_time:.2f} s)')
+        return head + (f'{100 * self.cost:+.2f} % ({self.with_limits:.6g} {unit} with them, '
+                       f'{self.without_limits:.6g} {unit} without the jerk and torque-rate '
+                       'rows' + (' (rest ends still at theta_ddot = 0)' if self.rest else '')
+                       + f', optimiser figures, extra solve {self.solve_time:.2f} s, '
+                       f'{self.iterations} iterations)')
+
+
+def limit_cost_from_message(message: str) -> dict | None:
+    """The LimitCost note of a plan's one-line message (the service answer's): {'note',
+    'quantity', 'cost' (fraction), 'with', 'without'} ('cost' etc. NaN if not known), None
+    without one (jerk_limits or limit_cost off, a baseline objective)."""
+    note = next((n for n in message.split('; ') if f' {LIMIT_COST_NOTE}: ' in n), None)
+    if note is None:
+        return None
+    m = re.match(r'(\w+) [^:]*: ([+-][0-9.]+) % \(([0-9.e+-]+) \w+ with them, '
+                 r'([0-9.e+-]+) \w+ without', note)
+    nan = float('nan')
+    return {'note': note, 'quantity': note.split(' ', 1)[0],
+            'cost': float(m.group(2)) / 100 if m else nan,
+            'with': float(m.group(3)) if m else nan, 'without': float(m.group(4)) if m else nan}
 
 
 @dataclass
@@ -127,6 +191,9 @@ class PlanResult:
     trajectory: dict | None = None       # the message's points: t, theta, q, qd, qdd, tau
     verification: Verification | None = None   # the independent check of that message
     optimizer_electrical_energy: float = float('nan')  # [J], own quadrature, electrical
+    # what the smoothness limits cost this plan (settings.limit_cost; None: not measured, for
+    # a trapezoid, a Fourier plan or with jerk_limits off)
+    limit_cost: LimitCost | None = None
 
 
 class _Entry:
@@ -140,6 +207,7 @@ class _Entry:
         self.min_duration: dict[tuple, tuple] = {}
         self.min_duration_unchecked: dict[tuple, float] = {}   # [s], see min_duration
         self.tightened: dict[tuple, dict] = {}   # per objective kind, see _solve_checked
+        self.free_duration: dict[tuple, tuple] = {}   # time-optimal without jerk rows
         self.lock = threading.Lock()
 
 
@@ -568,7 +636,8 @@ class Planner:
                 entry, base, checked, check, band,
                 far=req.duration if req.objective != OBJECTIVE_TIME else 0.0)
         except PlanError as exc:
-            raise _band_error(exc, band, 'at all') from None
+            raise self._certified(_band_error(exc, band, 'at all'), req, path, band,
+                                  checked, 'at all') from None
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
             raise PlanError(ERROR_INFEASIBLE_DURATION,
                             f'duration {req.duration:.4f} s is shorter than the time-optimal '
@@ -613,7 +682,8 @@ class Planner:
                 res, profile, checks, notes = self._solve_checked(sreq, checked, check, solve,
                                                                   req.duration, band, memory)
             except PlanError as exc:
-                raise _band_error(exc, band) from None
+                raise self._certified(_band_error(exc, band), req, path, band,
+                                      checked) from None
             coeffs = getattr(res, 'coeffs', None)
             e_opt, stats = res.energy, res.stats
         evaluation, trajectory, verification = checks
@@ -637,6 +707,11 @@ class Planner:
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
             notes.append('periodic profile: starts and ends at theta_dot = '
                          f'{profile.theta_dot[0]:.3f} rad/s')
+        cost = None
+        if (s.limit_cost and self.smooth_limits is not None
+                and req.objective in (OBJECTIVE_ENERGY, OBJECTIVE_TIME)):
+            cost = self._limit_cost(entry, req, base, res, profile)
+            notes.insert(0, cost.text())
         return PlanResult(
             objective=req.objective, profile=profile, evaluation=evaluation,
             optimizer_energy=e_opt, min_duration=t_min,
@@ -647,7 +722,49 @@ class Planner:
             notes=notes, trajectory=trajectory, verification=verification,
             optimizer_electrical_energy=float(getattr(res, 'electrical_energy', float('nan'))
                                               if req.objective != OBJECTIVE_TRAPEZOID
-                                              else float('nan')))
+                                              else float('nan')),
+            limit_cost=cost)
+
+    def _limit_cost(self, entry: _Entry, req: PlanRequest, base: SolveRequest, res,
+                    profile: ThetaProfile) -> LimitCost:
+        """The plan's LimitCost: its last solve (the accepted one, with the limits it was
+        tightened to) once more without the jerk rows, warm-started from it."""
+        tr = entry.transcription
+        last = tr.last_request
+        electrical = bool(ENERGY_MODELS[req.energy_model or ENERGY_MECHANICAL])
+        if req.objective == OBJECTIVE_TIME:
+            sreq = last if (last is not None and last.duration == 0.0
+                            and last.energy_weight == TIME_OBJECTIVE_ENERGY_WEIGHT
+                            and last.process_key == base.process_key) else replace(
+                base, duration=0.0, time_weight=1.0,
+                energy_weight=TIME_OBJECTIVE_ENERGY_WEIGHT)
+            quantity, have = 'duration', float(profile.duration)
+        else:
+            sreq = last if (last is not None and last.duration == req.duration
+                            and last.time_weight == req.time_weight) else replace(
+                base, duration=req.duration, time_weight=req.time_weight, energy_weight=1.0)
+            quantity = 'energy'
+            have = float(res.electrical_energy if electrical else res.energy)
+        key = (sreq.min_theta_dot, tuple(sreq.velocity_limit), tuple(sreq.torque_limit),
+               sreq.process_key)
+        with entry.lock:        # a time-optimal one: once per problem and limits
+            known = entry.free_duration.get(key) if quantity == 'duration' else None
+        rest = req.boundary == BOUNDARY_REST
+        if known is not None:
+            return LimitCost(quantity, have, *known, rest=rest)
+        free = tr.solve_without_jerk(sreq)
+        st = free.stats
+        if not st.success or free.profile is None:
+            value = float('nan')
+        elif quantity == 'duration':
+            value = float(free.profile.duration)
+        else:
+            value = float(free.electrical_energy if electrical else free.energy)
+        out = (value, st.solve_time, st.iterations, st.status)
+        if quantity == 'duration' and np.isfinite(value):
+            with entry.lock:
+                entry.free_duration[key] = out
+        return LimitCost(quantity, have, *out, rest=rest)
 
     def trajectory(self, profile: ThetaProfile, req: PlanRequest, path: PathBase,
                    fm: FrictionMap, raw_map: dict, checked: LimitSet
@@ -720,6 +837,50 @@ class Planner:
         t_b = profile.theta_at(inner)[0]
         half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
         return np.column_stack([t_b - half, t_b + half])
+
+    def _certified(self, exc: PlanError, req: PlanRequest, path: PathBase,
+                   band: TcpBand | None, checked: LimitSet, what: str = 'of this duration'
+                   ) -> PlanError:
+        """A refusal for process constraints the solver found infeasible, with the TCP jerk
+        certificate when there is one (certificate.py); ``exc`` unchanged otherwise."""
+        if (band is None or exc.code != ERROR_INFEASIBLE_DURATION
+                or not exc.message.startswith('no motion')):
+            return exc
+        cert = self.jerk_certificate(req, path, checked.velocity)
+        if cert is None:
+            return exc
+        return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
+                         f'{band_text(band)} together with the TCP jerk limit: {cert.text()}')
+
+    def jerk_certificate(self, req: PlanRequest, path: PathBase, velocity_limit: np.ndarray,
+                         samples: int = 4000) -> JerkCertificate | None:
+        """A lower bound above the TCP jerk limit on the TCP jerk of every motion along
+        ``path`` that keeps ``req``'s TCP speed floor (its ceiling and the joint speed limits
+        ``velocity_limit`` bound the speed from above): certificate.py. None if none is
+        found, the limits are off, or the path has interior piece ends (curvature jumps)."""
+        sm = self.smooth_limits
+        inner = np.asarray(path.breaks, float)
+        if (sm is None or not req.tcp_speed_min > 0 or not sm.tcp_jerk > 0
+                or np.any((inner > 0) & (inner < 2 * np.pi))):
+            return None
+        periodic = req.boundary == BOUNDARY_PERIODIC
+        theta = np.linspace(0.0, 2 * np.pi, samples + 1)
+        theta = theta[:-1] if periodic else theta
+        jp = self.sample_path(path)(theta)
+        d1v, d2v = path.d_point(theta), path.dd_point(theta)
+        d1 = np.linalg.norm(d1v, axis=1)
+        sigma = np.concatenate([[0.0], np.cumsum(0.5 * (d1[1:] + d1[:-1]) * np.diff(theta))])
+        L = float(sigma[-1])
+        if periodic:        # the closing piece
+            L += 0.5 * (d1[-1] + d1[0]) * (2 * np.pi - theta[-1])
+        with np.errstate(divide='ignore'):
+            v_cap = d1 * np.min(np.asarray(velocity_limit, float)[None, :]
+                                / np.abs(jp.dq), axis=1)
+        if req.tcp_speed_max > 0:
+            v_cap = np.minimum(v_cap, req.tcp_speed_max)
+        zone = None if periodic else (req.tcp_ramp_length, L - req.tcp_ramp_length)
+        return jerk_certificate(sigma, L, curvature(d1v, d2v), v_cap, req.tcp_speed_min,
+                                sm.tcp_jerk, periodic, zone)
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the

@@ -89,6 +89,9 @@ PARAMETERS = {
     'tcp_jerk_limit_m_s3': ('tcp_jerk_limit_m_s3', 'limit of the TCP jerk magnitude [m/s^3]'),
     'torque_rate_limit_nm_s': ('torque_rate_limit_nm_s', 'rate of the rigid-body torque '
                                'per joint [N m/s]'),
+    'limit_cost': ('limit_cost', 'report the cost of the smoothness limits in every energy '
+                   'and time plan (one more solve without the jerk rows, warm-started from '
+                   'the plan); false saves that time [-]'),
 }
 #: directories friction maps may be read from ([] = irb_description share, runs/, bags/)
 MAP_DIRS = 'friction_map_dirs'
@@ -212,7 +215,10 @@ class PlannerNode(Node):
             min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
             # the search's dozens of map plans are played at the evaluator's rate (>= 8
             # samples per interval): at 10 kHz a 10 s plan cost 2.8 s CPU instead of 1.1
-            play_rate_hz=settings.evaluation_rate_hz))
+            play_rate_hz=settings.evaluation_rate_hz,
+            # nor the extra solve of each plan's cost of the smoothness limits (the search
+            # compares plans; the re-planned answer of plan_path reports it)
+            limit_cost=False))
         self._place_lock = threading.Lock()
         self._place_state = ''            # what the running search is doing (for ERROR_BUSY)
         self._stopping = threading.Event()

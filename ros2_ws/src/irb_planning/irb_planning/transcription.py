@@ -83,7 +83,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import casadi as ca
@@ -642,8 +642,36 @@ class Transcription:
         x[:self._nb + self._na] *= (last.duration / req.duration) ** 2
         return self._with_epigraph(x)
 
-    def solve(self, req: SolveRequest, warm: bool | None = None) -> TranscriptionResult:
-        """Solve for ``req``; warm start from the previous solution when there is one."""
+    @property
+    def last_request(self) -> SolveRequest | None:
+        """The request of the last successful solve (None before one)."""
+        last = self._last
+        return None if last is None else last[3]
+
+    def solve_without_jerk(self, req: SolveRequest) -> TranscriptionResult:
+        """``req`` on this problem without its jerk rows (joint jerk and, through it, the
+        torque rate; TCP jerk): the reference of the limits' cost (planner.LimitCost).
+        Warm-started from the last solution, normally the plan's own, which is feasible here
+        (the rows only go): IPOPT starts on the plan and descends. The rest ends keep theta_ddot
+        = 0 and their constant-jerk intervals (the problem's structure). The last solution
+        stays the warm start of the next request (the plan's, inside the jerk rows)."""
+        saved = self._last
+        try:
+            # the warm (primal-dual) solver if this problem has one (13-22 iterations on the
+            # thesis circle); else the cold one from the plan (26-54 iterations; building the
+            # warm one for it cost ~12 s at N = 200)
+            return self.solve(replace(req, jerk_limit=None, tcp_jerk_max=0.0),
+                              warm=self._solver_warm is not None,
+                              start=None if saved is None else saved[0])
+        finally:
+            with self._lock:
+                self._last = saved
+
+    def solve(self, req: SolveRequest, warm: bool | None = None,
+              start: np.ndarray | None = None) -> TranscriptionResult:
+        """Solve for ``req``; warm start from the previous solution when there is one.
+        ``start``: the cold solver's initial point instead of ``initial_guess`` (a primal
+        start only: no second IPOPT instance is built for it)."""
         with self._lock:
             lbx, ubx, lbg, ubg = self._bounds(req)
             if np.any(lbx > ubx) or np.any(lbg > ubg):
@@ -663,6 +691,8 @@ class Transcription:
                         ipopt_options(min(self._max_iter, 40), self._tol, warm=True))
                 x0, lam_x, lam_g = self._last[:3]
                 x0 = np.clip(self._time_scaled(x0, self._last[3], req), lbx, ubx)
+                # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
+                lam_g = np.where(np.isinf(lbg) & np.isinf(ubg), 0.0, lam_g)
                 sol = self._solver_warm(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                                         lam_x0=lam_x, lam_g0=lam_g)
                 stats = self._solver_warm.stats()
@@ -672,7 +702,8 @@ class Transcription:
                 use_warm = False
             iters = stats['iter_count'] if use_warm else 0
             if not use_warm:
-                x0 = self.initial_guess(req, lbx, ubx)
+                x0 = (self.initial_guess(req, lbx, ubx) if start is None
+                      else np.clip(start, lbx, ubx))
                 sol = self._solver_cold(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
                 stats = self._solver_cold.stats()
                 iters += stats['iter_count']
@@ -684,7 +715,8 @@ class Transcription:
                 fallback = ca.nlpsol('transcription_adaptive', 'ipopt', self._nlp,
                                      ipopt_options(self._max_iter, self._tol,
                                                    extra={'mu_strategy': 'adaptive'}))
-                x0 = self.initial_guess(req, lbx, ubx)
+                x0 = (self.initial_guess(req, lbx, ubx) if start is None
+                      else np.clip(start, lbx, ubx))
                 sol = fallback(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
                 stats = fallback.stats()
                 iters += stats['iter_count']

@@ -21,7 +21,9 @@ def map_dir(tmp_path_factory):
 
 @pytest.fixture(scope='session')
 def planner(model, map_dir) -> Planner:
-    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID,
+    # limit_cost off: the suite's many plans skip the extra solve of the cost of the
+    # smoothness limits (test_smoothness.py tests it on its own planner)
+    return Planner(model.copy(), PlannerSettings(grid_size=TEST_GRID, limit_cost=False,
                                                  friction_map_dirs=(str(map_dir),)))
 
 

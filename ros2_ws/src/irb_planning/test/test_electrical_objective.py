@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from irb_planning.planner import Planner
+from irb_planning.planner import Planner, PlannerSettings
 from irb_planning.request import PlanError, PlanRequest, validate
 
 
@@ -25,7 +25,7 @@ def test_energy_model_names_equal_the_service_constants():
 
 @pytest.mark.slow
 def test_electrical_objective_checked_by_both_evaluators():
-    planner = Planner()
+    planner = Planner(settings=PlannerSettings(limit_cost=False))
     elec = planner.plan(PlanRequest(duration=6.0, grid_size=60,
                                     energy_model='electrical_none'))
     for res in (elec,):

@@ -377,7 +377,8 @@ def test_multistart_ends_on_the_real_planner_replanned_by_a_fresh_planner(model,
     from irb_planning.planner import Planner, PlannerSettings
     grid = planner.settings.grid_size
     searcher = Planner(model.copy(), PlannerSettings(
-        grid_size=grid, min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
+        grid_size=grid, min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
+        limit_cost=False))
     task = PlanRequest(radius=0.15, direction=1, duration=10.0)
     region = Region(np.array([0.6, -0.4, -0.17]), np.array([0.6, 0.4, -0.17]))
     lines = []
@@ -385,7 +386,7 @@ def test_multistart_ends_on_the_real_planner_replanned_by_a_fresh_planner(model,
                  progress=lines.append, starts=2)
     assert len(res.starts) == 2, lines
     assert any(line.startswith('multi-start: 2 of 2 starts ended') for line in lines)
-    oracle = Planner(model.copy(), PlannerSettings(grid_size=grid))
+    oracle = Planner(model.copy(), PlannerSettings(grid_size=grid, limit_cost=False))
     ends = []
     for s in res.starts:
         assert s['plans'] >= 1 and s['end_energy'] <= s['start_energy']

@@ -95,7 +95,7 @@ def test_joint_1_crossing_180_deg_is_refused_naming_the_joint(planner, center, r
 @pytest.mark.slow
 def test_the_valid_request_that_failed_is_planned(model):
     # defect 3: code 5 after 1000 iterations on the default grid (11 s and 12 s succeeded)
-    planner = Planner(model.copy())
+    planner = Planner(model.copy(), PlannerSettings(limit_cost=False))
     res = planner.plan(PlanRequest(center=np.array([0.74406, -0.23256, 0.36227]),
                                    radius=0.12188, start_angle=0.59492, direction=-1,
                                    duration=11.6135))
@@ -176,13 +176,14 @@ def test_relative_map_names_are_looked_up_in_the_allowed_directories(planner, mo
 def test_cache_memory_is_bounded(model):
     # defect 7: +60-70 MiB per cached problem, never returned; with a ceiling below the
     # process's size only the newest problem is kept
-    planner = Planner(model.copy(), PlannerSettings(grid_size=40, memory_limit_mib=1.0))
+    planner = Planner(model.copy(), PlannerSettings(grid_size=40, memory_limit_mib=1.0,
+                                                    limit_cost=False))
     for x in (0.55, 0.6, 0.65):
         planner.plan(PlanRequest(center=np.array([x, 0.0, 0.13]), duration=5.0))
     assert len(planner._cache) == 1
     # the count bound alone (a ceiling far above this process's size)
     many = Planner(model.copy(), PlannerSettings(grid_size=40, cache_size=2,
-                                                 memory_limit_mib=1e6))
+                                                 memory_limit_mib=1e6, limit_cost=False))
     for x in (0.55, 0.6, 0.65):
         many.plan(PlanRequest(center=np.array([x, 0.0, 0.13]), duration=5.0))
     assert len(many._cache) == 2
@@ -222,7 +223,7 @@ def test_polynomial_map_time_optimal_and_fast_plans(planner, model, map_dir, kwa
 
 def test_plant_map_time_optimal_at_grid_60(model):
     # defect 8: with the plant's map at grid 60 the time-optimal plan was refused
-    planner = Planner(model.copy(), PlannerSettings(grid_size=60,
+    planner = Planner(model.copy(), PlannerSettings(grid_size=60, limit_cost=False,
                                                     friction_map_dirs=(str(CONTROL_DIR),)))
     res = planner.plan(PlanRequest(objective='time', friction_map='plant.yaml'))
     assert_executable(res)

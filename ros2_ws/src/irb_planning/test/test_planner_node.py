@@ -17,6 +17,7 @@ from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from irb_planning import messages  # noqa: E402
 from irb_planning.planner_node import PlannerNode  # noqa: E402
+from irb_planning.planner import limit_cost_from_message  # noqa: E402
 
 pytestmark = pytest.mark.ros
 TIMEOUT = 120.0
@@ -24,12 +25,23 @@ TIMEOUT = 120.0
 
 @pytest.fixture
 def ros():
+    yield from _ros([])
+
+
+@pytest.fixture
+def ros_quick():
+    """Without the extra solve of the cost of the smoothness limits (limit_cost)."""
+    yield from _ros([Parameter('limit_cost', value=False)])
+
+
+def _ros(extra):
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '41')))
     ns = f'/planner_test_{uuid.uuid4().hex[:8]}'
     server = PlannerNode(context=ctx, namespace=ns,
                          parameter_overrides=[Parameter('grid_size', value=40),
-                                              Parameter('evaluation_rate_hz', value=500.0)])
+                                              Parameter('evaluation_rate_hz', value=500.0)]
+                         + extra)
     client = rclpy.create_node('planner_test_client', namespace=ns, context=ctx)
     executor = MultiThreadedExecutor(num_threads=3, context=ctx)
     executor.add_node(server)
@@ -78,6 +90,11 @@ def test_plan_latch_and_keep_serving_after_bad_requests(ros, model):
     assert t_end == pytest.approx(4.0, rel=1e-6)
     assert resp.energy == pytest.approx(resp.optimizer_energy, rel=0.01)
     assert resp.energy <= resp.baseline_energy and resp.baseline_feasible
+    # the cost of the smoothness limits, on by default (issue 28), in the answer's message
+    cost = limit_cost_from_message(resp.message)
+    assert cost is not None and cost['quantity'] == 'energy'
+    assert cost['with'] == pytest.approx(resp.optimizer_energy, rel=1e-5)
+    assert cost['without'] <= cost['with'] * (1 + 1e-5)
 
     # a late subscriber still gets the latched plan and theta profile
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -121,8 +138,8 @@ def test_plan_latch_and_keep_serving_after_bad_requests(ros, model):
     assert again.theta_interpolation == PlanPath.Response.INTERPOLATION_LINEAR
 
 
-def test_solve_does_not_block_other_callbacks(ros):
-    server, client, executor, ns = ros
+def test_solve_does_not_block_other_callbacks(ros_quick):
+    server, client, executor, ns = ros_quick
     cli = client.create_client(PlanPath, 'plan_path')
     params = client.create_client(GetParameters, f'{ns}/planner/get_parameters')
     assert cli.wait_for_service(timeout_sec=30.0)

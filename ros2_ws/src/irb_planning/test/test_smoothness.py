@@ -25,7 +25,7 @@ CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'planner.yaml'
 
 @pytest.fixture(scope='module')
 def planner():
-    return Planner(settings=PlannerSettings(grid_size=40, cache_size=4))
+    return Planner(settings=PlannerSettings(grid_size=40, cache_size=4, limit_cost=False))
 
 
 def test_default_on_and_documented():

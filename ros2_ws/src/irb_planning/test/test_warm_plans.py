@@ -28,7 +28,7 @@ def polyline(**kw) -> PlanRequest:
 
 
 def test_time_scaled_warm_start_meets_the_new_duration():
-    planner = Planner(settings=PlannerSettings(grid_size=GRID))
+    planner = Planner(settings=PlannerSettings(grid_size=GRID, limit_cost=False))
     T_min = planner.plan(polyline(objective='time')).min_duration
     T0 = 1.6 * T_min
     planner.plan(polyline(duration=T0))
@@ -59,7 +59,7 @@ def test_time_scaled_warm_start_meets_the_new_duration():
 
 @pytest.mark.slow
 def test_next_plan_starts_from_the_learned_tightening_and_stays_valid():
-    planner = Planner(settings=PlannerSettings(grid_size=GRID))
+    planner = Planner(settings=PlannerSettings(grid_size=GRID, limit_cost=False))
     T_min = planner.plan(polyline(objective='time')).min_duration
     T = 1.3 * T_min
     first = planner.plan(polyline(duration=T))
@@ -72,7 +72,7 @@ def test_next_plan_starts_from_the_learned_tightening_and_stays_valid():
     assert not any(n.startswith('limits tightened after') for n in second.notes)
     assert second.verification.ok and not second.evaluation.violations
     # oracle: a fresh planner (cold solves, its own tightening) at the same duration
-    fresh = Planner(settings=PlannerSettings(grid_size=GRID))
+    fresh = Planner(settings=PlannerSettings(grid_size=GRID, limit_cost=False))
     fresh.plan(polyline(objective='time'))
     ref = fresh.plan(polyline(duration=1.04 * T))
     assert ref.verification.ok
@@ -88,8 +88,9 @@ def test_far_requests_skip_only_the_time_optimal_check():
     profile; the plan returned is the same and checked in full. Oracle: the default planner
     (checks the time-optimal profile) on the same request."""
     req = PlanRequest(duration=10.0, grid_size=40)
-    ref = Planner().plan(req)
-    quick = Planner(settings=PlannerSettings(min_duration_check_factor=1.5))
+    ref = Planner(settings=PlannerSettings(limit_cost=False)).plan(req)
+    quick = Planner(settings=PlannerSettings(min_duration_check_factor=1.5,
+                                             limit_cost=False))
     got = quick.plan(req)
     assert any(n.startswith('min_duration is the optimiser') for n in got.notes)
     assert not any(n.startswith('min_duration is the optimiser') for n in ref.notes)
