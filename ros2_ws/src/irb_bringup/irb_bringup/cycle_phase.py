@@ -54,7 +54,8 @@ def run_cycle_phase(cfg_cycle: dict, rect: dict, duty: dict, out: Path, log) -> 
     why = glue_matches_rectangle(spec, rect)
     if why:
         raise ValueError(f'cycle {path}: {why} (thesis_run.yaml rectangle)')
-    planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200))
+    # the fronts' many plans: no cost-of-the-limits solve (irb_planning's cycle does the same)
+    planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200, limit_cost=False))
     plan = plan_cycle(spec, planner, cache_dir=out / 'fronts', progress=lambda s: log(f'   {s}'),
                       jobs=int(cfg_cycle.get('jobs', 1)))
     out.mkdir(parents=True, exist_ok=True)

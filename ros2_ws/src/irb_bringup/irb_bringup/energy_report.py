@@ -353,7 +353,8 @@ def placement_study(cfg: dict, friction_map: str | Path, plot_dir: Path, progres
     t0 = time.perf_counter()
     planner = Planner(settings=PlannerSettings(friction_map_dirs=(
         (str(Path(friction_map).resolve().parent),) if friction_map else ()),
-        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR))
+        min_duration_check_factor=PLACEMENT_MIN_DURATION_CHECK_FACTOR,
+        limit_cost=False))      # the search's many plans: no cost-of-the-limits solve
     task = PlanRequest(radius=float(cfg['radius_m']), direction=1,
                        duration=float(cfg['circle_duration_s']),
                        grid_size=int(cfg['planner_grid']),

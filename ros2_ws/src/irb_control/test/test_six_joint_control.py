@@ -184,7 +184,7 @@ def test_six_joint_closed_loop_follows_path_and_orientation(six, task):
     0.16 m/s, peak ~0.30 m/s), the plant's own friction as feed-forward: every joint moves,
     no stop, and the TCP stays on the path with the nozzle on its law (bounds with margin
     over the measured 0.36 mm / 0.30 deg; the goals are measured by
-    benchmarks/bench_six_joint.py)."""
+    irb_bringup/benchmarks/bench_six_joint.py)."""
     path, law = task
     kin = SixAxisKinematics(tcp=TCP)
     ref = np.linspace(0.0, 2 * np.pi, 721)

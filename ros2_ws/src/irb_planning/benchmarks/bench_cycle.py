@@ -48,7 +48,7 @@ def load_text() -> str:
 
 def make_planner(spec):
     from irb_planning.planner import Planner, PlannerSettings
-    return Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
+    return Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200, limit_cost=False,
                                             play_rate_hz=1000.0, evaluation_rate_hz=1000.0))
 
 

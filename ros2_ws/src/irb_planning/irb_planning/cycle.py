@@ -882,7 +882,9 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
         spec = replace(spec, takt_s=float(takt_s))
     check_continuity(spec)
     if planner is None:
-        planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200))
+        # the fronts' many plans: no cost-of-the-limits solve
+        planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
+                                                   limit_cost=False))
     check_reachable(spec, planner.model)
     if modes is None:
         modes = load_power_modes(spec.power_modes or None, electrical=planner.electrical)

@@ -144,6 +144,7 @@ def main(args=None):
     from .planner import Planner, PlannerSettings
     try:
         planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
+                                                   limit_cost=False,   # fronts' many plans
                                                    play_rate_hz=a.check_rate,
                                                    evaluation_rate_hz=a.check_rate,
                                                    electrical_config=a.electrical))

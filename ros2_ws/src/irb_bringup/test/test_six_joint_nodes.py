@@ -1,7 +1,8 @@
 """End to end on the nodes (issue 30): a six-axis plan from ``plan6 --publish`` taken by pdplus
 (joints 6) and played on the simulator (joints 6), measured from the simulator's
 /joint_states with the independent check's DH kinematics (benchmarks/bench_six_joint_nodes.py,
-whose ``run`` this calls; the rectangle's figures are in RESULTS.md)."""
+whose ``run`` this calls; the rectangle's figures are in irb_control's
+benchmarks/RESULTS.md)."""
 import importlib.util
 from pathlib import Path
 
