@@ -321,7 +321,6 @@ class PdPlusNode(Node):
             prof = default_circle_profile(self.model, self.path, P['profile_duration_s'],
                                           P['min_theta_dot'])
             if self.time_driven:
-                from .profiles import TimeTrajectory
                 rows = np.array([prof.sample(x) for x in prof.theta])
                 prof = TimeTrajectory(prof.t - prof.t[0], rows[:, 2:5], rows[:, 5:8],
                                       rows[:, 8:11])

@@ -56,7 +56,7 @@ def test_torque_equals_inverse_dynamics_when_errors_are_zero(model, circle, prof
     t, _ = run_to_path(ctrl, profile)
     for th in rng.uniform(0.3, 6.0, 5):
         row = profile.sample(th)
-        q, qd, qdd = row[2:5], row[5:8], row[8:11]
+        q, qd = row[2:5], row[5:8]
         ctrl._theta = ctrl._theta_v = th - 1e-9
         t += T
         out = ctrl.step(t, q, qd)

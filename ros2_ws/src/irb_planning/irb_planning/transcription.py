@@ -547,7 +547,7 @@ class Transcription:
         is: a bound per interval (the larger of its nodes', issue 28) shifted the ramp by a
         grid interval and refused the constant-acceleration start the ramp is meant for.
         Zero where there is no floor (the rest intervals, no tcp_speed_min)."""
-        N, K, J = self.N, self.N - 1, TIME_SUBSTEPS
+        K, J = self.N - 1, TIME_SUBSTEPS
         if req.tcp_speed_min <= 0:
             return np.zeros((J - 1, K)), np.zeros((J + 1, K))
         sig = self.tcp.sigma
