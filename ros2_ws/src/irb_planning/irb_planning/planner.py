@@ -702,8 +702,10 @@ class Planner:
             notes.append('min_duration is the optimiser\'s time-optimal duration, its profile '
                          'not played and checked (the request is >= '
                          f'{s.min_duration_check_factor:g} x longer)')
+        # against the model's full torque limits, as the gate judges (``checked`` carries
+        # the request's limit_scaling)
         notes += ['pdplus gate: ' + n for n in gate_limit_notes(
-            trajectory['qdd'], trajectory['tau'], checked.torque)]
+            trajectory['qdd'], trajectory['tau'], self.model.limits.torque)]
         if req.boundary == BOUNDARY_PERIODIC and req.objective != OBJECTIVE_TRAPEZOID:
             notes.append('periodic profile: starts and ends at theta_dot = '
                          f'{profile.theta_dot[0]:.3f} rad/s')
