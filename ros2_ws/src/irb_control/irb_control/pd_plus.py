@@ -185,9 +185,9 @@ def _scaled(q, qd, qdd, k: float, k_dot: float) -> tuple:
 
 
 def gain_scale(m_diag, design) -> np.ndarray:
-    """Factor (3,) on kp_i and kd_i: min(1, M_ii(q) / design_i), design (3,) [kg m^2] the
-    inertia the gains were tuned for (None: ones, constant gains). ``step`` applies the same
-    rule in plain floats."""
+    """Factor (n,) on kp_i and kd_i: min(1, M_ii(q) / design_i), design (n,) [kg m^2] the
+    inertia the gains were tuned for (None: ones, constant gains). The controller applies the
+    same rule in plain floats (``PdPlusController._gains``)."""
     m = np.asarray(m_diag, float)
     if design is None:
         return np.ones_like(m)
@@ -656,97 +656,11 @@ class PdPlusController:
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(3), self.mode, self.stop_reason)
-        prof = self.active          # the running reference: offered plans wait in pending
-        if self.mode == MODE_IDLE:
-            if not self._enable_requested or prof is None:
-                return ControlOutput(False, np.zeros(3), self.mode)
-            self._enable_requested = False
-            self._ramp_from = q.copy()
-            self._ramp_to = prof.q[0].copy()
-            self._ramp_T = ramp_duration(q, self._ramp_to, self.model.limits.velocity,
-                                         self.config.ramp_min_duration_s,
-                                         self.config.ramp_speed_fraction)
-            self._t0 = t
-            self.mode = MODE_RAMP
-            self._prev_tau = None
-
-        theta = theta_p = theta_dot_ref = math.nan
+        ref = self._reference(t, q)
+        if ref is None:
+            return ControlOutput(False, np.zeros(3), self.mode)
+        q_ref, qd_ref, qdd_ref, theta, theta_p, theta_dot_ref = ref
         d = self.delta
-        tp = t + d
-        time_driven = isinstance(prof, TimeTrajectory)
-        halt = None     # a controlled stop (hold): (r_s, T_s, v_s), from the step after hold()
-        if self._halt_T is not None or self._halt is not None:
-            if self.mode not in MOVING:             # the motion ended by itself meanwhile
-                self._halt_T = self._halt = None
-            else:
-                if self._halt is None:              # starts at this step's reference time
-                    self._halt = (tp, self._halt_T, tp - self._t0)
-                    self._halt_T = None
-                halt = self._halt
-        if self.mode == MODE_RAMP and halt is None and tp - self._t0 >= self._ramp_T:
-            self.mode = self._transition(EV_RAMP_DONE)[0]
-            self._t0 = self._t0 + self._ramp_T     # time origin of the profile
-            self._theta = prof.theta_start if not time_driven else 0.0
-            self._theta_v = self._theta
-        if halt is not None:     # progress rate k (1 -> 0), its rate, the virtual time at tp
-            k, k_dot, v_tp, u = _halt_rate(halt, tp)
-        if self.mode == MODE_RAMP:
-            q_ref, qd_ref, qdd_ref = (x.tolist() for x in quintic_ramp(
-                self._ramp_from, self._ramp_to, self._ramp_T,
-                tp - self._t0 if halt is None else v_tp))
-            if halt is not None:
-                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
-        elif self.mode == MODE_TIME:
-            tau = tp - self._t0 if halt is None else v_tp
-            row = prof.sample_list(tau)
-            q_ref, qd_ref, qdd_ref = row[0:3], row[3:6], row[6:9]
-            if halt is not None:
-                q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
-            if tau >= prof.duration:
-                self.mode = self._transition(EV_MOTION_DONE)[0]
-                self._hold = prof.q[-1].tolist()
-        elif self.mode == MODE_HOLD and (time_driven or prof is None):
-            q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
-        else:   # PATH or HOLD on a theta-profile
-            raw = self._theta_of(q)
-            # unwrap against the previous theta, clamp to the profile
-            dth = (raw - self._theta + math.pi) % (2 * math.pi) - math.pi
-            theta = min(max(self._theta + dth, prof.theta_start), prof.theta_end)
-            self._theta = theta
-            T = self.config.period_s
-            # progress governor: theta_v runs on h(theta_v) but stays within
-            # [theta, theta + theta_max_lead_rad]; 0 lead = theta from the measurement only
-            if halt is None:
-                tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
-            else:        # a controlled stop: theta_v and the prediction advance at k h
-                tv = min(self._theta_v + T * _halt_rate(halt, t)[0] * prof.h(self._theta_v),
-                         prof.theta_end)
-            tv = min(max(tv, theta), theta + self.config.theta_max_lead_rad)
-            self._theta_v = tv
-            th = tv
-            for j in range(self.config.prediction_samples):
-                kj = 1.0 if halt is None else _halt_rate(halt, t + (j + 1) * T)[0]
-                th = min(th + T * kj * prof.h(th), prof.theta_end)
-            theta_p = th
-            if self.mode == MODE_HOLD or tv >= prof.theta_end - self.config.end_tolerance_rad:
-                if self.mode != MODE_HOLD:
-                    self.mode = self._transition(EV_MOTION_DONE)[0]
-                    self._hold = prof.q[-1].tolist()
-                q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
-                theta_dot_ref = 0.0
-            else:
-                row = prof.sample_list(th)
-                theta_dot_ref = row[0]
-                q_ref, qd_ref, qdd_ref = row[2:5], row[5:8], row[8:11]
-                if halt is not None:
-                    theta_dot_ref *= k
-                    q_ref, qd_ref, qdd_ref = _scaled(q_ref, qd_ref, qdd_ref, k, k_dot)
-        if halt is not None and u >= 1.0 and self.mode in MOVING:
-            # the reference has come to rest on its own path: hold that pose, motors on
-            self.mode = MODE_HOLD
-            self._hold = list(q_ref)
-            self._halt = None
-            q_ref, qd_ref, qdd_ref = self._hold, [0.0] * 3, [0.0] * 3
 
         # delay compensation of the measurement, 'reference': q_p = q + d qd + d^2/2 qdd_ref,
         # qd_p = qd + d qdd_ref; 'commanded': the in-flight accelerations a_j instead (see
@@ -791,18 +705,7 @@ class PdPlusController:
             tf = self._friction_torque(qd_ref, (u0, u1, u2))
         else:
             tf = [0.0, 0.0, 0.0]
-        kp, kd = self.kp.tolist(), self.kd.tolist()
-        md = self._m_design
-        if md is not None:
-            # inertia-scheduled gains: the loop's bandwidth (kp/M_ii, kd/M_ii) never exceeds
-            # the tuned one. With constant gains, M_11 = 9 kg m^2 at the part-exchange pose
-            # (22 at the circle) put joint 1 at 2.4x its tuned bandwidth, beyond the ~1.6x the
-            # 3-sample delay allows: an 8.7 Hz limit cycle on the torque-rate limit
-            # (doc/gain_schedule.md)
-            for i, m_ii in enumerate((m00, m11, m22)):
-                if m_ii < md[i]:
-                    s_i = m_ii / md[i]
-                    kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
+        kp, kd = self._gains((m00, m11, m22))
         fb = [kp[0] * e[0] + kd[0] * de[0], kp[1] * e[1] + kd[1] * de[1],
               kp[2] * e[2] + kd[2] * de[2]]
         tau = [tm[0] + tf[0] + fb[0], tm[1] + tf[1] + fb[1], tm[2] + tf[2] + fb[2]]
@@ -828,46 +731,31 @@ class PdPlusController:
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
 
-    def _nan_fields(self) -> dict:
-        """ControlOutput's NaN reference fields for n joints ({} for 3: the defaults)."""
-        if self.n == 3:
-            return {}
-        n = self.n
-        return {k: np.full(n, np.nan) for k in ('q_ref', 'qd_ref', 'qdd_ref', 'q_error',
-                                                  'qd_error', 'tau_model', 'tau_friction',
-                                                  'tau_feedback')}
+    def _gains(self, m_diag) -> tuple[list, list]:
+        """kp, kd (lists of n floats) at the mass matrix's diagonal m_diag (n floats): the
+        inertia-scheduled gains, kp_i and kd_i x min(1, M_ii / design_i) (``gain_scale``'s
+        rule), so the loop's bandwidth (kp/M_ii, kd/M_ii) never exceeds the tuned one. With
+        constant gains, M_11 = 9 kg m^2 at the part-exchange pose (22 at the circle) put joint
+        1 at 2.4x its tuned bandwidth, beyond the ~1.6x the 3-sample delay allows: an 8.7 Hz
+        limit cycle on the torque-rate limit (doc/gain_schedule.md)."""
+        kp, kd = self.kp.tolist(), self.kd.tolist()
+        md = self._m_design
+        if md is not None:
+            for i, m_ii in enumerate(m_diag):
+                if m_ii < md[i]:
+                    s_i = m_ii / md[i]
+                    kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
+        return kp, kd
 
-    def _step_n(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
-        """``step`` on n joints (the six-joint arm): the same operations, in the same order,
-        on n-lists instead of unrolled floats (on three joints the same result to the bit as
-        ``step``, tested); every change to ``step`` belongs here too."""
+    def _reference(self, t: float, q: np.ndarray):
+        """The mode machine and the reference at t + Delta, shared by ``step`` and ``_step_n``
+        (lists of n floats): None while IDLE without an enable (no command), else
+        (q_ref, qd_ref, qdd_ref, theta, theta_p, theta_dot_ref)."""
         n = self.n
-        R = range(n)
-        q = np.asarray(q, dtype=float)
-        qd = np.asarray(qd, dtype=float)
-        if q.shape != (n,) or qd.shape != (n,) or not math.isfinite(t):
-            return self._rejected()
-        ql = q.tolist()
-        wl = qd.tolist()
-        isfinite = math.isfinite
-        if not (all(map(isfinite, ql)) and all(map(isfinite, wl))):
-            return self._rejected()
-        if self.mode == MODE_STOPPED:
-            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
-                                 **self._nan_fields())
-        # safety on the measurement
-        vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
-        if any(abs(wl[i]) > vm[i] for i in R):
-            self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
-        elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
-            self.stop(f'position limit: q = {q.round(4).tolist()} rad')
-        if self.mode == MODE_STOPPED:
-            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
-                                 **self._nan_fields())
         prof = self.active          # the running reference: offered plans wait in pending
         if self.mode == MODE_IDLE:
             if not self._enable_requested or prof is None:
-                return ControlOutput(False, np.zeros(n), self.mode, **self._nan_fields())
+                return None
             self._enable_requested = False
             self._ramp_from = q.copy()
             self._ramp_to = prof.q[0].copy()
@@ -923,7 +811,8 @@ class PdPlusController:
             theta = min(max(self._theta + dth, prof.theta_start), prof.theta_end)
             self._theta = theta
             T = self.config.period_s
-            # progress governor (see ``step``)
+            # progress governor: theta_v runs on h(theta_v) but stays within
+            # [theta, theta + theta_max_lead_rad]; 0 lead = theta from the measurement only
             if halt is None:
                 tv = min(self._theta_v + T * prof.h(self._theta_v), prof.theta_end)
             else:        # a controlled stop: theta_v and the prediction advance at k h
@@ -956,6 +845,50 @@ class PdPlusController:
             self._hold = list(q_ref)
             self._halt = None
             q_ref, qd_ref, qdd_ref = self._hold, zero, zero
+        return q_ref, qd_ref, qdd_ref, theta, theta_p, theta_dot_ref
+
+    def _nan_fields(self) -> dict:
+        """ControlOutput's NaN reference fields for n joints ({} for 3: the defaults)."""
+        if self.n == 3:
+            return {}
+        n = self.n
+        return {k: np.full(n, np.nan) for k in ('q_ref', 'qd_ref', 'qdd_ref', 'q_error',
+                                                  'qd_error', 'tau_model', 'tau_friction',
+                                                  'tau_feedback')}
+
+    def _step_n(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
+        """``step`` on n joints (the six-joint arm): the same operations, in the same order,
+        on n-lists instead of unrolled floats (on three joints the same result to the bit as
+        ``step``, tested); every change to ``step`` belongs here too."""
+        n = self.n
+        R = range(n)
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        if q.shape != (n,) or qd.shape != (n,) or not math.isfinite(t):
+            return self._rejected()
+        ql = q.tolist()
+        wl = qd.tolist()
+        isfinite = math.isfinite
+        if not (all(map(isfinite, ql)) and all(map(isfinite, wl))):
+            return self._rejected()
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
+                                 **self._nan_fields())
+        # safety on the measurement
+        vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
+        if any(abs(wl[i]) > vm[i] for i in R):
+            self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
+        elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
+            self.stop(f'position limit: q = {q.round(4).tolist()} rad')
+        if self.mode == MODE_STOPPED:
+            return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
+                                 **self._nan_fields())
+        ref = self._reference(t, q)
+        if ref is None:
+            return ControlOutput(False, np.zeros(n), self.mode, **self._nan_fields())
+        q_ref, qd_ref, qdd_ref, theta, theta_p, theta_dot_ref = ref
+        d = self.delta
+        zero = [0.0] * n
 
         # delay compensation of the measurement (see ``step``)
         fl = self._in_flight
@@ -998,14 +931,7 @@ class PdPlusController:
             tf = self._friction_torque_n(qd_ref, uu)
         else:
             tf = zero
-        kp, kd = self.kp.tolist(), self.kd.tolist()
-        md = self._m_design
-        if md is not None:          # inertia-scheduled gains, as in ``step``
-            for i in R:
-                m_ii = M[i, i]
-                if m_ii < md[i]:
-                    s_i = float(m_ii) / md[i]
-                    kp[i], kd[i] = kp[i] * s_i, kd[i] * s_i
+        kp, kd = self._gains(M.diagonal().tolist())
         fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
         ki = self._ki
         if ki is not None:      # integral action: candidate, bounded to +-limit
