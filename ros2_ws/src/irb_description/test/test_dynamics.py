@@ -23,8 +23,9 @@ def test_casadi_rnea_equals_pinocchio_rnea(model, rng):
 
 def test_batched_rnea_equals_rnea_row_by_row(model, rng):
     # the plan check and identification evaluate (M, 3) arrays with inverse_dynamics_batch
-    q = rng.uniform(model.limits.lower, model.limits.upper, (500, 3))
-    qd, qdd = rng.uniform(-3, 3, (500, 3)), rng.uniform(-10, 10, (500, 3))
+    # (5000 rows: across its chunks of RNEA_CHUNK_ROWS)
+    q = rng.uniform(model.limits.lower, model.limits.upper, (5000, 3))
+    qd, qdd = rng.uniform(-3, 3, (5000, 3)), rng.uniform(-10, 10, (5000, 3))
     rows = np.array([model.inverse_dynamics(a, b, c) for a, b, c in zip(q, qd, qdd)])
     assert np.array_equal(model.inverse_dynamics_batch(q, qd, qdd), rows)
     assert np.array_equal(model.inverse_dynamics_batch(q[:1], qd[:1], qdd[:1]), rows[:1])

@@ -561,8 +561,7 @@ def gate_check(model, traj: dict) -> tuple[list, float]:
     qdd. (one line per broken rule, factor < 1 on the limit scaling that should clear them;
     1.0 when none is broken)."""
     q, qd, qdd = (np.asarray(traj[k], float) for k in ('q', 'qd', 'qdd'))
-    tau = np.array([model.inverse_dynamics(q[k], qd[k], qdd[k]) for k in range(len(q))])
-    tau = tau + model.friction.torque(qd)
+    tau = model.inverse_dynamics_batch(q, qd, qdd) + model.friction.torque(qd)
     lim = np.asarray(model.limits.torque, float)
     notes = gate_limit_notes(qdd, tau, lim, GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION)
     if not notes:
