@@ -237,6 +237,17 @@ def test_status_of_the_real_simulator_and_pdplus(tmp_path, capsys):
              for exe, extra in (('simulator', ['-p', 'mode:=realtime']),
                                 ('pdplus', ['-p', 'auto_enable:=false']))]
     try:
+        # both nodes on the graph first: status reports the graph as it is, and on a loaded
+        # host the simulator (pinocchio, model) can come up seconds after pdplus (a fresh-clone
+        # CI saw a status without the drive)
+        from irb_bringup.ctl import _discover, _Session
+        session = _Session([])
+        try:
+            seen, _, drives = _discover(session, f'{ns}/pdplus', BOUND_S,
+                                        lambda found, settled: found[0] and bool(found[2]))
+        finally:
+            session.close()
+        assert seen and drives == [f'{ns}/simulator/reset'], (seen, drives)
         t0 = time.monotonic()
         assert main(['status', '--pdplus', f'{ns}/pdplus', '--timeout', '60',
                      '--window', '0.5']) == 0
