@@ -4,12 +4,17 @@
         $(ros2 pkg prefix irb_planning)/share/irb_planning/config/path6_rectangle.yaml \
         --duration 8 --json plan6.json
     ros2 run irb_planning plan6 --path-file glue6.yaml --objective time
+    ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8 --energy-model electrical
 
 The path file is ``plan --path-file``'s mapping plus an ``orientation`` block
 (``irb_description.orientation.orientation_from_spec``): law fixed (rpy or z/x), path_normal
-(normal, approach, x_mode, x_ref) or slerp (keyframes). Prints the plan (configuration,
-time-optimal duration, energy, peak torques and speeds of the six joints) and its played check
-(quintic per joint at 10 kHz, own DH kinematics: position and orientation error). Exit 0
+(normal, approach, x_mode, x_ref) or slerp (keyframes). Energy plans minimise the mechanical
+energy or the six axes' electrical energy (``--energy-model``; irb_description
+config/electrical.yaml). Every plan keeps the smoothness limits as played (joint jerk,
+rigid-body torque rate, TCP jerk; config/six_axis_plan.yaml ``jerk_limits``). Prints the plan
+(configuration, time-optimal duration, mechanical and electrical energy, peak torques, speeds,
+jerks and torque rates of the six joints) and its played check (quintic per joint at 10 kHz,
+own DH kinematics: position and orientation error). Exit 0
 planned, 1 refused (unreachable, too short, fails the check), 2 bad arguments or path file.
 
 ``--publish``: hands the plan to pdplus (``joints:=6``) as the planner node does: a latched
@@ -40,6 +45,12 @@ def parse_args(argv):
     p.add_argument('--objective', choices=('energy', 'time'), default='energy',
                    help='energy: minimum mechanical energy at --duration; time: time-optimal')
     p.add_argument('--duration', type=float, default=0.0, help='[s] duration of an energy plan')
+    p.add_argument('--energy-model', default='mechanical',
+                   choices=('mechanical', 'electrical', 'electrical_none', 'electrical_shared',
+                            'electrical_regenerative'),
+                   help='the energy an energy plan minimises: mechanical (sum |tau qd|) or '
+                   "the six axes' electrical model (electrical: electrical.yaml's DC-bus mode; "
+                   'electrical_<mode>: that mode)')
     p.add_argument('--grid', type=int, default=0,
                    help='theta nodes (0 = config/six_axis_plan.yaml grid_size)')
     p.add_argument('--tcp', type=float, nargs=3, default=None, metavar=('X', 'Y', 'Z'),
@@ -114,15 +125,18 @@ def publish(points: dict, joint_names, spec: dict, a) -> int:
         rclpy.try_shutdown()
 
 
-def summary(plan, limits) -> str:
+def summary(plan, limits, smooth=None) -> str:
     import numpy as np
     c = plan.check
+    kind = 'mechanical' if plan.energy_model == 'mechanical' else 'electrical'
     lines = [f'configuration   {"/".join(plan.configuration)}',
              f'objective       {plan.objective}',
              f'time-optimal    {plan.min_duration:.3f} s',
              f'duration        {plan.duration:.3f} s',
-             f'energy          {plan.energy:.2f} J as played '
-             f'(optimiser {plan.optimizer_energy:.2f} J)',
+             f'energy model    {plan.energy_model}',
+             f'energy          {plan.energy:.2f} J mechanical, '
+             f'{plan.electrical_energy:.2f} J electrical as played (optimiser '
+             f'{plan.optimizer_energy:.2f} J {kind})',
              f'solve           {plan.solve_time:.2f} s, {plan.iterations} iterations '
              f'(problem built in {plan.build_time:.2f} s)',
              f'points          {len(plan.trajectory["t"])}',
@@ -133,6 +147,17 @@ def summary(plan, limits) -> str:
              '  limit         ' + ' '.join(f'{v:8.2f}' for v in limits.torque),
              'peak speed      ' + ' '.join(f'{v:8.3f}' for v in c.peak_speed) + '  rad/s',
              '  limit         ' + ' '.join(f'{v:8.3f}' for v in limits.velocity)]
+    if c.peak_jerk is not None:
+        lines += ['peak jerk       ' + ' '.join(f'{v:8.1f}' for v in c.peak_jerk) + '  rad/s^3',
+                  'peak torque rate' + ' '.join(f'{v:8.0f}' for v in c.peak_torque_rate)
+                  + '  N m/s',
+                  f'peak TCP jerk   {c.tcp_jerk_peak:.2f} m/s^3'
+                  + (' (blend ends apart: {:.2f})'.format(c.blend['tcp_jerk'])
+                     if c.blend else '')]
+        if smooth is not None:
+            lines += ['  jerk limit    ' + ' '.join(f'{v:8.1f}' for v in smooth.jerk),
+                      '  rate limit    ' + ' '.join(f'{v:8.0f}' for v in smooth.torque_rate),
+                      f'  TCP jerk limit {smooth.tcp_jerk:g} m/s^3']
     lines += [f'note: {n}' for n in plan.notes]
     return '\n'.join(lines)
 
@@ -173,17 +198,24 @@ def main(args=None):
         tcp = pose(np.eye(3), a.tcp)
     planner = SixAxisPlanner(tcp=tcp)
     try:
-        prob = planner.problem(path, law, a.grid or None)
+        prob = planner.problem(path, law, a.grid or None, energy_model=a.energy_model)
         plan = planner.plan(prob, a.objective, a.duration)
     except SixAxisPlanError as exc:
         print(f'plan6: refused: {exc}', file=sys.stderr)
         return 1
-    print(summary(plan, planner.limits))
+    print(summary(plan, planner.limits, planner.smooth_limits))
     if a.json:
         tr = plan.trajectory
         out = {'configuration': list(plan.configuration), 'objective': plan.objective,
                'duration_s': plan.duration, 'min_duration_s': plan.min_duration,
-               'energy_j': plan.energy, 'optimizer_energy_j': plan.optimizer_energy,
+               'energy_model': plan.energy_model,
+               'energy_j': plan.energy, 'electrical_energy_j': plan.electrical_energy,
+               'optimizer_energy_j': plan.optimizer_energy,
+               'peak_jerk_rad_s3': None if plan.check.peak_jerk is None
+               else plan.check.peak_jerk.tolist(),
+               'peak_torque_rate_nm_s': None if plan.check.peak_torque_rate is None
+               else plan.check.peak_torque_rate.tolist(),
+               'tcp_jerk_peak_m_s3': plan.check.tcp_jerk_peak,
                'played_position_error_m': plan.check.position_error,
                'played_orientation_error_rad': plan.check.orientation_error,
                'peak_torque_nm': plan.check.peak_torque.tolist(),

@@ -474,20 +474,8 @@ class Planner:
         raise AssertionError('unreachable')
 
     def _tighten_smooth(self, sreq: SolveRequest, ver: Verification) -> dict:
-        """SolveRequest fields of the smoothness limits the played trajectory broke: a joint's
-        jerk limit scaled by limit / played peak of its jerk or torque rate (- 0.1 %), the
-        TCP jerk likewise; {} if none."""
-        sm = self.smooth_limits
-        if sm is None or ver.peak_jerk is None or sreq.jerk_limit is None:
-            return {}
-        fix = {}
-        ratio = np.maximum(ver.peak_jerk / sm.jerk, ver.peak_torque_rate / sm.torque_rate)
-        if np.any(ratio > 1 + LIMIT_RTOL):
-            fix['jerk_limit'] = np.where(ratio > 1 + LIMIT_RTOL,
-                                         sreq.jerk_limit / ratio * 0.999, sreq.jerk_limit)
-        if sm.tcp_jerk > 0 and ver.tcp_jerk_peak > sm.tcp_jerk * (1 + LIMIT_RTOL):
-            fix['tcp_jerk_max'] = sreq.tcp_jerk_max * sm.tcp_jerk / ver.tcp_jerk_peak * 0.999
-        return fix
+        """``tighten_smooth`` with this planner's smoothness limits."""
+        return tighten_smooth(self.smooth_limits, sreq, ver)
 
     def min_duration(self, entry: _Entry, base: SolveRequest, checked: LimitSet, check,
                      band: TcpBand | None = None, far: float = 0.0) -> tuple[float, tuple]:
@@ -1047,6 +1035,23 @@ def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) ->
                         'constraints by more than their band (' + '; '.join(
                             p for p in ver.problems if p.startswith('tcp_'))[:300]
                         + '): ask for a larger grid_size')
+    return fix
+
+
+def tighten_smooth(sm: SmoothLimits | None, sreq: SolveRequest, ver) -> dict:
+    """SolveRequest fields of the smoothness limits ``sm`` the played trajectory broke (``ver``
+    has peak_jerk, peak_torque_rate (n,) and tcp_jerk_peak: the three- and the six-axis
+    checks): a joint's jerk limit scaled by limit / played peak of its jerk or torque rate
+    (- 0.1 %), the TCP jerk likewise; {} if none."""
+    if sm is None or ver.peak_jerk is None or sreq.jerk_limit is None:
+        return {}
+    fix = {}
+    ratio = np.maximum(ver.peak_jerk / sm.jerk, ver.peak_torque_rate / sm.torque_rate)
+    if np.any(ratio > 1 + LIMIT_RTOL):
+        fix['jerk_limit'] = np.where(ratio > 1 + LIMIT_RTOL,
+                                     sreq.jerk_limit / ratio * 0.999, sreq.jerk_limit)
+    if sm.tcp_jerk > 0 and ver.tcp_jerk_peak > sm.tcp_jerk * (1 + LIMIT_RTOL):
+        fix['tcp_jerk_max'] = sreq.tcp_jerk_max * sm.tcp_jerk / ver.tcp_jerk_peak * 0.999
     return fix
 
 

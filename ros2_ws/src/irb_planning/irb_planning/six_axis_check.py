@@ -20,7 +20,13 @@ limits. It shares nothing with the planner's theta interpolation or the closed-f
   small angles;
 * **limits** of the played samples: positions, speeds, torques = the given rigid-body
   function (pinocchio RNEA on six joints in the planner) + friction evaluated here from the
-  map's numbers (``verify.MapFriction``); energy int sum |tau_i qd_i| dt.
+  map's numbers (``verify.MapFriction``); energy int sum |tau_i qd_i| dt (and, given an
+  electrical model, its electrical energy of the played torques and speeds);
+* **smoothness** (given ``verify.SmoothLimits``, as the three-axis check): joint jerk from the
+  quintics' own third derivative, the rate of the rigid-body torque and the TCP jerk as
+  differences between samples of the TCP acceleration (``verify.dh_point_rates`` at the TCP,
+  analytic in q, qd, qdd); samples inside ``smooth_exempt`` windows (the twin points around a
+  blend end, where the path's curvature jumps) are reported apart.
 """
 from __future__ import annotations
 
@@ -30,8 +36,8 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import BPoly
 
-from .verify import LIMIT_RTOL, DHTable, MapFriction, PathCurve
-
+from .verify import (LIMIT_RTOL, DHTable, MapFriction, PathCurve, SmoothLimits,
+                     check_smooth, dh_point_rates)
 
 
 
@@ -41,7 +47,7 @@ def rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     return 2.0 * np.arcsin(np.clip(diff / np.sqrt(8.0), 0.0, 1.0))
 
 
-def play(t, q, qd, qdd, rate_hz: float = 10_000.0):
+def play(t, q, qd, qdd, rate_hz: float = 10_000.0, jerk: bool = False):
     """The points t (K,) [s], q, qd, qdd (K, n) played by quintic Hermite interpolation per
     joint at ``rate_hz`` from t[0] (and at every stamp): (ts, qs, qds, qdds).
 
@@ -49,7 +55,8 @@ def play(t, q, qd, qdd, rate_hz: float = 10_000.0):
     interval of length h: q0, q0 + h v0 / 5, q0 + 2 h v0 / 5 + h^2 a0 / 20, and mirrored from
     the end (q1 - 2 h v1 / 5 + h^2 a1 / 20, q1 - h v1 / 5, q1): the polynomial whose value,
     first and second derivative match (q, qd, qdd) at both ends (``BPoly.from_derivatives``
-    gives the same, one interval at a time in Python)."""
+    gives the same, one interval at a time in Python). ``jerk``: the third derivative too
+    (a fifth item)."""
     t = np.asarray(t, float)
     q, qd, qdd = (np.asarray(x, float) for x in (q, qd, qdd))
     clock = t[0] + np.arange(int(np.floor((t[-1] - t[0]) * rate_hz)) + 1) / rate_hz
@@ -60,7 +67,8 @@ def play(t, q, qd, qdd, rate_hz: float = 10_000.0):
                   q[1:] - 2 * h * qd[1:] / 5 + h ** 2 * qdd[1:] / 20,
                   q[1:] - h * qd[1:] / 5, q[1:]])              # (6, K - 1, n)
     poly = BPoly(c, t)
-    return ts, poly(ts), poly.derivative(1)(ts), poly.derivative(2)(ts)
+    out = (ts, poly(ts), poly.derivative(1)(ts), poly.derivative(2)(ts))
+    return out + (poly.derivative(3)(ts),) if jerk else out
 
 
 @dataclass
@@ -86,6 +94,11 @@ class PlayedCheck:
     position_errors: np.ndarray = field(default=None, repr=False)
     orientation_errors: np.ndarray = field(default=None, repr=False)
     peak_accel: np.ndarray = field(default=None)     # (6,) [rad/s^2] of the played samples
+    peak_jerk: np.ndarray | None = None              # (6,) [rad/s^3] as played (smooth)
+    peak_torque_rate: np.ndarray | None = None       # (6,) [N m/s] rigid-body torque, played
+    tcp_jerk_peak: float = float('nan')              # [m/s^3] as played
+    blend: dict = field(default_factory=dict)        # the same peaks inside smooth_exempt
+    electrical_energy: float = float('nan')          # [J] of the played torques and speeds
 
     @property
     def ok(self) -> bool:
@@ -96,14 +109,19 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
                  lower, upper, velocity, torque, rigid_torque: Callable | None = None,
                  friction_joints: dict | None = None, joint_names=None,
                  rate_hz: float = 10_000.0, position_tol: float = 1e-4,
-                 orientation_tol: float = np.radians(0.05)) -> PlayedCheck:
+                 orientation_tol: float = np.radians(0.05),
+                 smooth: SmoothLimits | None = None, smooth_exempt=None,
+                 electrical=None) -> PlayedCheck:
     """Play the points and measure (module docstring).
 
     path: anything with point, d_point, dd_point (theta -> (M, 3)) and closed;
     rotation(theta (M,)) -> (M, 3, 3): the law; tcp (4, 4) on tool0 (= the DH frame 6);
     lower, upper, velocity, torque (6,) the limits checked; rigid_torque(q, qd, qdd) (M, 6) ->
     (M, 6) [N m] and friction_joints (a friction map's ``joints`` mapping, names
-    ``joint_names``): the torque as played (None: not checked)."""
+    ``joint_names``): the torque as played (None: not checked); ``smooth``: the smoothness
+    limits checked (None: measured only, with the torques), ``smooth_exempt`` (B, 2) [s] the
+    windows reported apart; ``electrical``: an ``ElectricalModel`` of the six axes (the
+    played electrical energy, with the torques)."""
     t, q, qd, qdd = (np.asarray(x, float) for x in (t, q, qd, qdd))
     problems = []
     if not all(np.all(np.isfinite(x)) for x in (t, q, qd, qdd)) or t.size < 2 \
@@ -125,7 +143,7 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
         ori = rotation_angle(np.asarray(rotation(th), float), T[:, :3, :3])
         return pos, ori
     pos_pts, ori_pts = errors(q)
-    ts, qs, qds, qdds = play(t, q, qd, qdd, rate_hz)
+    ts, qs, qds, qdds, jerk = play(t, q, qd, qdd, rate_hz, jerk=True)
     pos, ori = errors(qs)
     kp, ko = int(np.argmax(pos)), int(np.argmax(ori))
     if pos[kp] > position_tol:
@@ -146,15 +164,50 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
         if peak_v[i] > velocity[i] * (1 + LIMIT_RTOL):
             problems.append(f'joint {i + 1} speed {peak_v[i]:.3f} rad/s > {velocity[i]:.3f}')
     peak_tau, energy = np.full(q.shape[1], np.nan), float('nan')
+    elec, smooth_out = float('nan'), {}
     if rigid_torque is not None:
-        tau = np.asarray(rigid_torque(qs, qds, qdds), float)
+        tau_r = np.asarray(rigid_torque(qs, qds, qdds), float)
+        tau = tau_r
         if friction_joints is not None:
             tau = tau + MapFriction(friction_joints, list(joint_names))(qds)
         peak_tau = np.abs(tau).max(axis=0)
         energy = float(np.trapezoid(np.abs(tau * qds).sum(axis=1), ts))
+        if electrical is not None:
+            elec = float(electrical.energy(ts, tau, qds))
         for i in np.flatnonzero(peak_tau > torque * (1 + LIMIT_RTOL)):
             problems.append(f'joint {i + 1} torque {peak_tau[i]:.2f} N m > {torque[i]:.2f}')
+        smooth_out = _smoothness(ts, qs, qds, qdds, jerk, tau_r, tcp, dh, smooth,
+                                 smooth_exempt, problems)
     return PlayedCheck(float(pos[kp]), float(ori[ko]), float(ts[kp]), float(ts[ko]),
                        float(pos_pts.max()), float(ori_pts.max()), peak_v, peak_tau, energy,
                        float(t[-1] - t[0]), int(ts.size), problems, ts, pos, ori,
-                       np.abs(qdds).max(axis=0))
+                       np.abs(qdds).max(axis=0), electrical_energy=elec, **smooth_out)
+
+
+def _smoothness(ts, qs, qds, qdds, jerk, tau_r, tcp, dh: DHTable, smooth, exempt,
+                problems: list) -> dict:
+    """Peaks of the joint jerk (at the samples), the rigid-body torque rate and the TCP jerk
+    (between samples) outside the ``exempt`` windows, and inside them apart (``blend``);
+    ``smooth``'s limits checked into ``problems`` (as the three-axis check does)."""
+    dts = np.diff(ts)[:, None]
+    rate = np.abs(np.diff(tau_r, axis=0)) / dts
+    acc = dh_point_rates(dh, qs, qds, qdds, origin=np.asarray(tcp, float)[:, 3])[1]
+    tj = np.linalg.norm(np.diff(acc, axis=0), axis=1) / dts[:, 0]
+    out_j, out_r = np.ones(jerk.shape[0], bool), np.ones(rate.shape[0], bool)
+    for lo, hi in (() if exempt is None else np.asarray(exempt, float)):
+        out_j &= ~((ts >= lo) & (ts < hi))
+        out_r &= ~((ts[1:] > lo) & (ts[:-1] < hi))
+    n = jerk.shape[1]
+    blend = {}
+    if not out_j.all() or not out_r.all():
+        blend = {'joint_jerk': np.abs(jerk[~out_j]).max(axis=0) if (~out_j).any()
+                 else np.zeros(n),
+                 'torque_rate': rate[~out_r].max(axis=0) if (~out_r).any() else np.zeros(n),
+                 'tcp_jerk': float(tj[~out_r].max()) if (~out_r).any() else 0.0}
+    if smooth is not None:
+        check_smooth(smooth, ts, np.where(out_j[:, None], jerk, 0.0),
+                     np.where(out_r[:, None], rate, 0.0), np.where(out_r, tj, 0.0), problems)
+    return {'peak_jerk': np.abs(jerk[out_j]).max(axis=0) if out_j.any() else np.zeros(n),
+            'peak_torque_rate': rate[out_r].max(axis=0) if out_r.any() else np.zeros(n),
+            'tcp_jerk_peak': float(tj[out_r].max()) if out_r.any() else 0.0,
+            'blend': blend}

@@ -6,8 +6,14 @@ Phi'' (N, 6)), the path-projected dynamics tau = m a + c b + g + tau_f(Phi' sqrt
 the six-joint CasADi RNEA (``SixAxisDynamics.rnea_function``) through
 ``problem.path_dynamics``, and the NLP is ``transcription.Transcription`` (direct
 transcription in b = theta_dot^2, a = theta_ddot; nothing in it is three-axis: its joint
-count is the columns of Phi'). Time-optimal and mechanical-energy-optimal at a given duration,
-with the speed, torque and position limits of all six joints.
+count is the columns of Phi'). Time-optimal and energy-optimal at a given duration, on either
+energy model: mechanical (sum |tau_i qd_i|) or the electrical model of the six axes
+(irb_description config/electrical.yaml, its DC-bus mode or one asked for), with the speed,
+torque and position limits of all six joints and, as the three-axis planner, the smoothness
+limits (issue 28): joint jerk, rigid-body torque rate and TCP jerk as played, rest ends with a
+constant path jerk (``jerk_limits``). Joints 1-3 keep the three-axis planner's limits
+(``PlannerSettings``, its config/planner.yaml); the wrist's are this planner's settings
+(config/six_axis_plan.yaml, stated assumptions).
 
 What is not reused, and why: ``planner.Planner`` is bound to the three-axis ``RobotModel``
 (its path check, IK, pinocchio workspace, friction-map files of three joints, electrical
@@ -49,15 +55,19 @@ from irb_description.six_axis_model import nominal_six_joint_friction
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, worst_inconsistency)
 
-from .planner import message_points, theta_grid
+from .planner import (PlannerSettings, jerk_path, message_points, theta_grid,
+                      tighten_smooth)
 from .problem import casadi_friction, path_dynamics
 from .profile import ThetaProfile
-from .six_axis_check import DHTable, PlayedCheck, check_played
+from .six_axis_check import DHTable, PlayedCheck, SmoothLimits, check_played
 from .transcription import (BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT, SolveRequest,
                             Transcription)
 
 CONFIG_NAME = 'six_axis_plan.yaml'
 OBJECTIVES6 = ('energy', 'time')
+#: energy models: mechanical, or electrical with the DC-bus mode of electrical.yaml or a named one
+ENERGY_MODELS6 = ('mechanical', 'electrical', 'electrical_none', 'electrical_shared',
+                  'electrical_regenerative')
 #: joint_path6's central-difference step [rad] (its default h)
 CENTRAL_STEP = 1e-4
 
@@ -187,6 +197,10 @@ class SixAxisSettings:
     max_trajectory_points: int = 20000
     reference_samples: int = 721        # theta samples every IK call is continued along
     side_step_rad: float = 1e-3         # one-sided differences at a polyline's piece ends
+    jerk_limits: bool = True            # joint jerk, torque rate, TCP jerk kept as played
+    wrist_jerk_limit_rad_s3: tuple = (1000.0, 1000.0, 1000.0)        # joints 4-6
+    wrist_torque_rate_limit_nm_s: tuple = (1200.0, 1200.0, 600.0)    # joints 4-6
+    electrical_smoothing_w: float = 0.5  # eps [W] of |.| in the electrical NLP objective
 
     @classmethod
     def from_config(cls, cfg: dict) -> 'SixAxisSettings':
@@ -194,6 +208,12 @@ class SixAxisSettings:
         unknown = set(block) - set(cls.__dataclass_fields__)
         if unknown:
             raise ValueError(f'{CONFIG_NAME} planner: unknown keys {sorted(unknown)}')
+        for k in ('wrist_jerk_limit_rad_s3', 'wrist_torque_rate_limit_nm_s'):
+            if k in block:
+                v = tuple(float(x) for x in block[k])
+                if len(v) != 3 or not all(np.isfinite(x) and x > 0 for x in v):
+                    raise ValueError(f'{CONFIG_NAME} planner: {k} needs 3 values > 0')
+                block[k] = v
         return cls(**block)
 
 
@@ -213,6 +233,7 @@ class SixAxisProblem:
     sample: object
     build_time: float
     min_duration: dict = field(default_factory=dict)
+    energy_model: str = 'mechanical'
 
 
 @dataclass
@@ -234,11 +255,18 @@ class SixAxisPlan:
     check: PlayedCheck
     configuration: tuple
     notes: list = field(default_factory=list)
+    energy_model: str = 'mechanical'
 
     @property
     def energy(self) -> float:
         """Mechanical energy of the trajectory as played [J]."""
         return self.check.energy
+
+    @property
+    def electrical_energy(self) -> float:
+        """Electrical energy of the trajectory as played [J] (the six axes' electrical model,
+        the plan's DC-bus mode; standby included)."""
+        return self.check.electrical_energy
 
 
 class SixAxisPlanner:
@@ -266,6 +294,33 @@ class SixAxisPlanner:
         k = self.kin.kinematics
         self.dh = DHTable(k.dh_a, k.dh_alpha, k.dh_d, k.dh_offset)
         self._friction_joints = self.limits.friction.to_dict()['friction_map']['joints']
+        from irb_description.electrical import load_electrical
+        self.electrical = load_electrical().axes(6)
+
+    @property
+    def smooth_limits(self) -> SmoothLimits | None:
+        """The smoothness limits every plan keeps as played (None: jerk_limits off): joints
+        1-3 and the TCP jerk as the three-axis planner (``PlannerSettings``), the wrist's
+        from this planner's settings."""
+        s = self.settings
+        if not s.jerk_limits:
+            return None
+        arm = PlannerSettings()
+        return SmoothLimits(
+            np.concatenate([np.broadcast_to(np.asarray(arm.joint_jerk_limit_rad_s3, float),
+                                            (3,)), s.wrist_jerk_limit_rad_s3]),
+            float(arm.tcp_jerk_limit_m_s3),
+            np.concatenate([np.broadcast_to(np.asarray(arm.torque_rate_limit_nm_s, float),
+                                            (3,)), s.wrist_torque_rate_limit_nm_s]))
+
+    def electrical_model(self, energy_model: str):
+        """The six axes' ElectricalModel of ``energy_model`` ('electrical': electrical.yaml's
+        bus mode; 'electrical_<mode>': that mode)."""
+        if energy_model not in ENERGY_MODELS6 or energy_model == 'mechanical':
+            raise SixAxisPlanError(f'energy model must be one of {list(ENERGY_MODELS6[1:])} '
+                                   f'for an electrical model, not {energy_model!r}')
+        mode = energy_model.partition('_')[2]
+        return self.electrical.with_mode(mode) if mode else self.electrical
 
     # --- the joint path -------------------------------------------------------------------
     def _sampler(self, path: PathBase, law: OrientationLaw, cfg, q0):
@@ -329,10 +384,17 @@ class SixAxisPlanner:
         return dq, ddq
 
     def problem(self, path: PathBase, law: OrientationLaw, grid_size: int | None = None,
-                configuration=None, seed=None, boundary: str = BOUNDARY_REST) -> SixAxisProblem:
+                configuration=None, seed=None, boundary: str = BOUNDARY_REST,
+                energy_model: str = 'mechanical') -> SixAxisProblem:
         """Build the NLP for ``path`` with ``law`` (configuration kept all along: given, or the
-        one nearest ``seed`` at the start, or the first that solves the path)."""
+        one nearest ``seed`` at the start, or the first that solves the path), its energy
+        objective on ``energy_model`` (ENERGY_MODELS6)."""
         s = self.settings
+        if energy_model not in ENERGY_MODELS6:
+            raise SixAxisPlanError(f'energy model must be one of {list(ENERGY_MODELS6)}, '
+                                   f'not {energy_model!r}')
+        electrical = None if energy_model == 'mechanical' else \
+            self.electrical_model(energy_model)
         t0 = time.perf_counter()
         ref = np.linspace(0.0, 2 * np.pi, s.reference_samples)
         try:
@@ -352,29 +414,39 @@ class SixAxisPlanner:
                 idx = np.flatnonzero(np.isin(theta, path.breaks))
                 sides = (idx, path_dynamics(theta[idx], lambda th: sample(th, 'other'),
                                             self._inverse_dynamics))
+            jerk = jerk_path(path, sample, theta, nodes, sides) if s.jerk_limits else None
         except UnreachablePoseError as exc:
             raise SixAxisPlanError(f'path unreachable: {exc}') from None
         friction = casadi_friction(self.limits.friction, s.friction_smoothing_rad_s)
         tr = Transcription(nodes, mids, friction, boundary=boundary, max_iter=s.max_iterations,
-                           tol=s.tolerance, warm_start=True, sides=sides)
+                           tol=s.tolerance, warm_start=True, sides=sides,
+                           electrical=electrical,
+                           bus_mode=electrical.bus_mode if electrical is not None else 'shared',
+                           electrical_smoothing=s.electrical_smoothing_w, jerk=jerk)
         return SixAxisProblem(path, law, cfg, q0, theta, nodes, mids, tr, sample,
-                              time.perf_counter() - t0)
+                              time.perf_counter() - t0, energy_model=energy_model)
 
     def _nlp_limits(self) -> SolveRequest:
         s, lim = self.settings, self.limits
         keep = 1.0 - s.constraint_margin
         vel = np.minimum(lim.velocity, lim.friction.valid_range()[:, 1])
+        sm = self.smooth_limits
         return SolveRequest(0.0, 0.0, 1.0, s.min_theta_dot_rad_s, vel * keep,
-                            lim.torque * keep)
+                            lim.torque * keep,
+                            jerk_limit=None if sm is None else sm.jerk * keep,
+                            tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep)
 
     # --- message points and the played check -------------------------------------------
     def trajectory(self, prob: SixAxisProblem, profile: ThetaProfile,
-                   consistency: bool = True) -> tuple[dict, PlayedCheck, list]:
+                   consistency: bool = True, smooth: bool = False
+                   ) -> tuple[dict, PlayedCheck, list]:
         """The message's points: the profile's nodes, each interval split into m equal theta
         pieces (m = 1, 2, 4, ...) until the trajectory played by quintic interpolation stays
         within half the position and orientation tolerances and keeps the consistency rule
         of ``trajectory_rules`` with half its tolerances (``consistency``; or the point budget
-        is used; the check then says whether it is within the tolerances)."""
+        is used; the check then says whether it is within the tolerances). ``smooth``: the
+        final check holds the plan to the smoothness limits too (a profile made without them,
+        e.g. a trapezoid, is only measured)."""
         s = self.settings
         nodes = profile.theta
         problems = []
@@ -396,7 +468,9 @@ class SixAxisPlanner:
             if (within and bad is None) or 2 * m * (nodes.size - 1) + 1 > s.max_trajectory_points:
                 break
             m *= 2
-        chk = self.check(prob, t, jp.q, qd, qdd)        # the torques too, on the final points
+        # the torques, smoothness and energies too, on the final points
+        chk = self.check(prob, t, jp.q, qd, qdd, smooth=smooth,
+                         exempt=self.blend_windows(profile, prob.path))
         if bad is not None:
             problems.append(f'inconsistent {bad.what}: joint {bad.joint + 1} at point '
                             f'{bad.point} (t = {t[bad.point]:.4f} s): {bad.detail()}')
@@ -426,17 +500,36 @@ class SixAxisPlanner:
         inv = self.dynamics.inverse_dynamics
         return np.array([inv(a, b, c) for a, b, c in zip(q, qd, qdd)])
 
-    def check(self, prob: SixAxisProblem, t, q, qd, qdd, torque: bool = True) -> PlayedCheck:
+    def blend_windows(self, profile: ThetaProfile, path: PathBase) -> np.ndarray | None:
+        """(B, 2) [s]: the message intervals between the twin points around each interior
+        piece end (the three-axis planner's rule), reported apart by the smoothness check."""
+        inner = np.asarray(path.breaks, float)
+        inner = inner[(inner > 0) & (inner < 2 * np.pi)]
+        if inner.size == 0:
+            return None
+        t_b = profile.theta_at(inner)[0]
+        half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
+        return np.column_stack([t_b - half, t_b + half])
+
+    def check(self, prob: SixAxisProblem, t, q, qd, qdd, torque: bool = True,
+              smooth: bool = False, exempt=None) -> PlayedCheck:
         """``six_axis_check.check_played`` of the points with this planner's limits (the
-        played torques and energy only with ``torque``)."""
+        played torques, mechanical and electrical energy and smoothness peaks only with
+        ``torque``; the smoothness limits checked with ``smooth``, ``exempt`` windows
+        apart)."""
         s, lim = self.settings, self.limits
+        model = getattr(prob, 'energy_model', 'mechanical')
+        electrical = (self.electrical if model == 'mechanical'
+                      else self.electrical_model(model))
         return check_played(t, q, qd, qdd, prob.path, prob.law.rotation, self.tcp, self.dh,
                             lim.lower, lim.upper, np.minimum(
                                 lim.velocity, lim.friction.valid_range()[:, 1]), lim.torque,
                             self.rigid_torque if torque else None, self._friction_joints,
                             self.kin.joint_names,
                             s.play_rate_hz, s.path_tolerance_m,
-                            np.radians(s.orientation_tolerance_deg))
+                            np.radians(s.orientation_tolerance_deg),
+                            smooth=self.smooth_limits if smooth else None,
+                            smooth_exempt=exempt, electrical=electrical if torque else None)
 
     # --- solves -----------------------------------------------------------------------------
     def _solve_checked(self, prob: SixAxisProblem, sreq: SolveRequest, duration: float,
@@ -458,13 +551,15 @@ class SixAxisPlanner:
             profile = res.profile
             for _ in range(2 if duration > 0 else 0):
                 profile = profile.scaled_in_time(duration / profile.duration)
-            traj, chk, problems = self.trajectory(prob, profile, consistency)
+            traj, chk, problems = self.trajectory(prob, profile, consistency, smooth=True)
             over_tau = chk.peak_torque - lim.torque
             over_v = chk.peak_speed - vel_lim
-            limit_hit = np.any(over_tau > 0) or np.any(over_v > 0)
+            smooth_fix = tighten_smooth(self.smooth_limits, sreq, chk)
+            limit_hit = np.any(over_tau > 0) or np.any(over_v > 0) or bool(smooth_fix)
             if not limit_hit or attempt == s.adapt_rounds:
                 return res, profile, traj, chk, notes + problems, spent, iters
             notes.append('limits tightened after the played check: ' + '; '.join(chk.problems))
+            sreq = replace(sreq, **smooth_fix)
             sreq = replace(sreq, torque_limit=np.where(
                 over_tau > 0, sreq.torque_limit - over_tau - 1e-3 * lim.torque,
                 sreq.torque_limit), velocity_limit=np.where(
@@ -494,7 +589,7 @@ class SixAxisPlanner:
         t_min, t_out = self.min_duration(prob)
         if objective == 'time':
             res, profile, traj, chk, notes, spent, iters = t_out
-            traj, chk, problems = self.trajectory(prob, profile)
+            traj, chk, problems = self.trajectory(prob, profile, smooth=True)
             notes = notes + problems
         else:
             if duration < t_min * (1 - 1e-9):
@@ -509,5 +604,7 @@ class SixAxisPlanner:
         if problems:
             raise SixAxisPlanError(f'the {objective} plan fails the played check: '
                                    + '; '.join(problems))
-        return SixAxisPlan(objective, profile, profile.duration, t_min, float(res.energy),
-                           spent, iters, prob.build_time, traj, chk, prob.configuration, notes)
+        opt = float(res.electrical_energy if prob.energy_model != 'mechanical' else res.energy)
+        return SixAxisPlan(objective, profile, profile.duration, t_min, opt,
+                           spent, iters, prob.build_time, traj, chk, prob.configuration, notes,
+                           prob.energy_model)

@@ -187,6 +187,62 @@ class DHTable:
         return T
 
 
+def dh_point_rates(dh: DHTable, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                   origin=None, positions: bool = False) -> tuple[np.ndarray, ...]:
+    """Velocity and acceleration (M, 3) [m/s, m/s^2] of a point fixed on the flange (DH frame
+    6; ``origin``: its homogeneous coordinates (4,) there, default the origin e_4, e.g. a
+    TCP's last column) under joint motions (M, <= 6): the
+    DH product A_1 ... A_6 applied to it and differentiated in time, from the
+    right: x_7 = origin, x_i = A_i x_(i+1), x_i' = A_i x_(i+1)' + qd_i A_i,th x_(i+1),
+    x_i'' = A_i x_(i+1)'' + 2 qd_i A_i,th x_(i+1)' + (qd_i^2 A_i,thth + qdd_i A_i,th)
+    x_(i+1); the TCP's (p, v, a) are x_1, x_1', x_1'' (A_i,th = dA_i/dtheta_i). Vectors,
+    not 4 x 4 products, so a 10 kHz play of a long plan costs milliseconds per second of
+    motion. ``positions``: (p, v, a), p the TCP of the same product (= ``tcp``)."""
+    q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
+    M, n = q.shape
+    zero = np.zeros(M)
+    o = [0.0, 0.0, 0.0, 1.0] if origin is None else [float(v) for v in origin]
+    x = [zero + o[0], zero + o[1], zero + o[2], zero + o[3]]   # x_7: the point on the flange
+    x1, x2 = [zero] * 4, [zero] * 4                 # its first and second time derivatives
+
+    def parts(v, a, ca, sa):
+        # A_i v = (c u - s g, s u + c g, sa v1 + ca v2 + d v3, v3) with u = v0 + a v3,
+        # g = ca v1 - sa v2; A_i,th v = (-s u - c g, c u - s g, 0, 0) and A_i,thth v =
+        # -(c u - s g, s u + c g, 0, 0)
+        return v[0] + a * v[3], ca * v[1] - sa * v[2]
+
+    for i in range(5, -1, -1):
+        a, d = float(dh.a[i]), float(dh.d[i])
+        ca, sa = float(np.cos(dh.alpha[i])), float(np.sin(dh.alpha[i]))
+        th = (q[:, i] if i < n else 0.0) + float(dh.offset[i])
+        c, s_ = np.cos(th) + zero, np.sin(th) + zero
+
+        def apply(v):
+            u, g = parts(v, a, ca, sa)
+            return [c * u - s_ * g, s_ * u + c * g, sa * v[1] + ca * v[2] + d * v[3], v[3]]
+
+        def d_theta(v):
+            u, g = parts(v, a, ca, sa)
+            return [-s_ * u - c * g, c * u - s_ * g, zero, zero]
+
+        if i < n and (np.any(qd[:, i]) or np.any(qdd[:, i])):
+            w, wd = qd[:, i], qdd[:, i]
+            dx, dx1 = d_theta(x), d_theta(x1)
+            ax = apply(x)
+            # A_i,thth x = -(the rotating rows of A_i x)
+            x2 = [r + 2 * w * e1 + wd * e0 for r, e1, e0 in zip(apply(x2), dx1, dx)]
+            x2[0] = x2[0] - w ** 2 * ax[0]
+            x2[1] = x2[1] - w ** 2 * ax[1]
+            x1 = [r + w * e0 for r, e0 in zip(apply(x1), dx)]
+            x = ax
+        else:
+            x, x1, x2 = apply(x), apply(x1), apply(x2)
+    p, v, acc = (np.stack(y[:3], axis=1) for y in (x, x1, x2))
+    if positions:
+        return p, v, acc
+    return v, acc
+
+
 @dataclass(frozen=True)
 class ArmKinematics:
     """DH table (6,) each [m]/[rad], and the limits (3,) checked: lower/upper [rad],
@@ -207,55 +263,10 @@ class ArmKinematics:
 
     def tcp_rates(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                   positions: bool = False) -> tuple[np.ndarray, ...]:
-        """TCP velocity and acceleration (M, 3) [m/s, m/s^2] of joint motions (M, <= 6): the
-        DH product A_1 ... A_6 applied to the origin e_4 and differentiated in time, from the
-        right: x_7 = e_4, x_i = A_i x_(i+1), x_i' = A_i x_(i+1)' + qd_i A_i,th x_(i+1),
-        x_i'' = A_i x_(i+1)'' + 2 qd_i A_i,th x_(i+1)' + (qd_i^2 A_i,thth + qdd_i A_i,th)
-        x_(i+1); the TCP's (p, v, a) are x_1, x_1', x_1'' (A_i,th = dA_i/dtheta_i). Vectors,
-        not 4 x 4 products, so a 10 kHz play of a long plan costs milliseconds per second of
-        motion. ``positions``: (p, v, a), p the TCP of the same product (= ``tcp``)."""
-        q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
-        M, n = q.shape
-        zero = np.zeros(M)
-        x = [zero, zero, zero, np.ones(M)]             # x_7 = e_4 (the flange's origin)
-        x1, x2 = [zero] * 4, [zero] * 4                 # its first and second time derivatives
-
-        def parts(v, a, ca, sa):
-            # A_i v = (c u - s g, s u + c g, sa v1 + ca v2 + d v3, v3) with u = v0 + a v3,
-            # g = ca v1 - sa v2; A_i,th v = (-s u - c g, c u - s g, 0, 0) and A_i,thth v =
-            # -(c u - s g, s u + c g, 0, 0)
-            return v[0] + a * v[3], ca * v[1] - sa * v[2]
-
-        for i in range(5, -1, -1):
-            a, d = float(self.a[i]), float(self.d[i])
-            ca, sa = float(np.cos(self.alpha[i])), float(np.sin(self.alpha[i]))
-            th = (q[:, i] if i < n else 0.0) + float(self.offset[i])
-            c, s_ = np.cos(th) + zero, np.sin(th) + zero
-
-            def apply(v):
-                u, g = parts(v, a, ca, sa)
-                return [c * u - s_ * g, s_ * u + c * g, sa * v[1] + ca * v[2] + d * v[3], v[3]]
-
-            def d_theta(v):
-                u, g = parts(v, a, ca, sa)
-                return [-s_ * u - c * g, c * u - s_ * g, zero, zero]
-
-            if i < n and (np.any(qd[:, i]) or np.any(qdd[:, i])):
-                w, wd = qd[:, i], qdd[:, i]
-                dx, dx1 = d_theta(x), d_theta(x1)
-                ax = apply(x)
-                # A_i,thth x = -(the rotating rows of A_i x)
-                x2 = [r + 2 * w * e1 + wd * e0 for r, e1, e0 in zip(apply(x2), dx1, dx)]
-                x2[0] = x2[0] - w ** 2 * ax[0]
-                x2[1] = x2[1] - w ** 2 * ax[1]
-                x1 = [r + w * e0 for r, e0 in zip(apply(x1), dx)]
-                x = ax
-            else:
-                x, x1, x2 = apply(x), apply(x1), apply(x2)
-        p, v, acc = (np.stack(y[:3], axis=1) for y in (x, x1, x2))
-        if positions:
-            return p, v, acc
-        return v, acc
+        """TCP velocity and acceleration (M, 3) [m/s, m/s^2] of joint motions (M, <= 6)
+        (``dh_point_rates`` at the flange's origin); ``positions``: (p, v, a)."""
+        return dh_point_rates(DHTable(self.a, self.alpha, self.d, self.offset), q, qd, qdd,
+                              positions=positions)
 
 
 @dataclass(frozen=True)

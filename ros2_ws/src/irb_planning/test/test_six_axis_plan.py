@@ -177,3 +177,68 @@ def test_wrist_friction_one_source(planned):
     again = other.plan(other.problem(path, law, GRID), 'energy', DURATION)
     for k in ('t', 'q', 'qd', 'qdd'):
         assert np.array_equal(np.asarray(again.trajectory[k]), np.asarray(plan.trajectory[k]))
+
+
+def test_smoothness_limits_hold_as_played(planned):
+    """The plan keeps the smoothness limits (issue 28) on six joints, measured here apart
+    from the planner's check: joint jerk from this test's quintic (BPoly's third derivative),
+    the TCP jerk as third differences of irb_description's link-chain TCP (not the check's DH
+    product) on a 10 kHz clock, the rigid-body torque rate from pinocchio's RNEA of the played
+    samples. The arc has no blend, so nothing is exempt."""
+    from irb_description.six_axis_dynamics import SixAxisDynamics
+    planner, path, law, plan, _ = planned
+    sm = planner.smooth_limits
+    assert sm is not None and sm.jerk.size == 6 and np.all(sm.jerk[3:] > 0)
+    tr = plan.trajectory
+    t, q, qd, qdd = (np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd'))
+    dt = 1e-4
+    ts = t[0] + np.arange(int((t[-1] - t[0]) / dt) + 1) * dt
+    polys = [BPoly.from_derivatives(t, np.stack([q[:, i], qd[:, i], qdd[:, i]], 1), orders=5)
+             for i in range(6)]
+    jerk = np.stack([p.derivative(3)(ts) for p in polys], axis=1)
+    assert np.all(np.abs(jerk).max(axis=0) <= sm.jerk * (1 + 1e-6)), np.abs(jerk).max(axis=0)
+    qs = np.stack([p(ts) for p in polys], axis=1)
+    p_tcp = planner.kin.fk(qs)[:, :3, 3]
+    j_tcp = np.linalg.norm(np.diff(p_tcp, 3, axis=0), axis=1) / dt ** 3
+    # third differences average the jerk over 3 dt; round-off ~1e-16 m / dt^3 = 1e-4 m/s^3
+    assert j_tcp.max() <= sm.tcp_jerk * (1 + 1e-3), j_tcp.max()
+    dyn = SixAxisDynamics()
+    k = slice(None, None, 10)                              # 1 kHz: the rate between samples
+    qds = np.stack([p.derivative(1)(ts[k]) for p in polys], axis=1)
+    qdds = np.stack([p.derivative(2)(ts[k]) for p in polys], axis=1)
+    tau = np.array([dyn.inverse_dynamics(a, b, c) for a, b, c in zip(qs[k], qds, qdds)])
+    rate = np.abs(np.diff(tau, axis=0)).max(axis=0) / (10 * dt)
+    assert np.all(rate <= sm.torque_rate * (1 + 1e-3)), rate
+    # the planner's own peaks are those measured here (its check plays the same points)
+    assert plan.check.peak_jerk == pytest.approx(np.abs(jerk).max(axis=0), rel=1e-3, abs=1e-3)
+    assert plan.check.tcp_jerk_peak == pytest.approx(j_tcp.max(), rel=0.02)
+
+
+def test_electrical_energy_model(planned):
+    """An energy plan on the six axes' electrical model: its played electrical energy (the
+    model applied here to this test's own torques: pinocchio RNEA + the friction map's numbers
+    of the played samples) is what the optimiser says, and at most the mechanical plan's
+    electrical energy (the objective each minimises)."""
+    from irb_description.electrical import load_electrical
+    from irb_description.six_axis_dynamics import SixAxisDynamics
+    planner, path, law, mech, _ = planned
+    prob = planner.problem(path, law, GRID, energy_model='electrical')
+    plan = planner.plan(prob, 'energy', DURATION)
+    assert plan.energy_model == 'electrical' and not plan.check.problems
+    model = load_electrical().axes(6)
+    dyn = SixAxisDynamics()
+    fm = planner.limits.friction
+    tr = plan.trajectory
+    t, q, qd, qdd = (np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd'))
+    ts = np.linspace(t[0], t[-1], 4001)
+    polys = [BPoly.from_derivatives(t, np.stack([q[:, i], qd[:, i], qdd[:, i]], 1), orders=5)
+             for i in range(6)]
+    qs, qds, qdds = (np.stack([p.derivative(d)(ts) if d else p(ts) for p in polys], axis=1)
+                     for d in (0, 1, 2))
+    tau = np.array([dyn.inverse_dynamics(a, b, c) for a, b, c in zip(qs, qds, qdds)])
+    tau = tau + fm.torque(qds)
+    e_own = model.energy(ts, tau, qds)
+    assert e_own == pytest.approx(plan.electrical_energy, rel=2e-3)
+    assert plan.optimizer_energy == pytest.approx(plan.electrical_energy, rel=1e-2)
+    assert plan.electrical_energy <= mech.electrical_energy * (1 + 1e-4), (
+        plan.electrical_energy, mech.electrical_energy)
