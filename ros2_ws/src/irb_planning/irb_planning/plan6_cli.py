@@ -5,6 +5,8 @@
         --duration 8 --json plan6.json
     ros2 run irb_planning plan6 --path-file glue6.yaml --objective time
     ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8 --energy-model electrical
+    ros2 run irb_planning plan6 --path-file glue6.yaml --duration 8 --energy-model electrical \
+        --place-lo -0.1 -0.2 -0.1 --place-hi 0.1 0.2 0.1 --place-n 3 3 3
 
 The path file is ``plan --path-file``'s mapping plus an ``orientation`` block
 (``irb_description.orientation.orientation_from_spec``): law fixed (rpy or z/x), path_normal
@@ -14,7 +16,14 @@ config/electrical.yaml). Every plan keeps the smoothness limits as played (joint
 rigid-body torque rate, TCP jerk; config/six_axis_plan.yaml ``jerk_limits``). Prints the plan
 (configuration, time-optimal duration, mechanical and electrical energy, peak torques, speeds,
 jerks and torque rates of the six joints) and its played check (quintic per joint at 10 kHz,
-own DH kinematics: position and orientation error). Exit 0
+own DH kinematics: position and orientation error).
+
+Placement (``--place-n``): the task (path and orientation law) moved by every offset of the
+box ``--place-lo`` .. ``--place-hi`` [m] (relative to the path file's placement; a translation,
+so the tool orientations are the file's), an energy plan of ``--duration`` at each on the coarse
+``--place-grid``, checked as played; the map is printed (energy of ``--energy-model`` or the
+reason of each refusal), then the best placement is planned on the full grid and is the plan
+printed, written (``--json``) and published. Exit 1 if no placement can be planned. Exit 0
 planned, 1 refused (unreachable, too short, fails the check), 2 bad arguments or path file.
 
 ``--publish``: hands the plan to pdplus (``joints:=6``) as the planner node does: a latched
@@ -55,6 +64,16 @@ def parse_args(argv):
                    help='theta nodes (0 = config/six_axis_plan.yaml grid_size)')
     p.add_argument('--tcp', type=float, nargs=3, default=None, metavar=('X', 'Y', 'Z'),
                    help='[m] TCP offset on tool0 (default: config/six_axis_plan.yaml tcp)')
+    p.add_argument('--place-n', type=int, nargs=3, default=None, metavar=('NX', 'NY', 'NZ'),
+                   help='placement search: grid points per axis of the offset box (then the '
+                   'best placement is the plan)')
+    p.add_argument('--place-lo', type=float, nargs=3, default=[-0.1, -0.1, -0.1],
+                   metavar=('X', 'Y', 'Z'), help='[m] offset box corner (default -0.1 each)')
+    p.add_argument('--place-hi', type=float, nargs=3, default=[0.1, 0.1, 0.1],
+                   metavar=('X', 'Y', 'Z'), help='[m] offset box corner (default 0.1 each)')
+    p.add_argument('--place-grid', type=int, default=40,
+                   help='theta nodes of each placement\'s plan (the best is re-planned on '
+                   '--grid)')
     p.add_argument('--json', default='', help="write the plan and its points here ('' = no)")
     p.add_argument('--publish', action='store_true',
                    help='publish the plan on /planned_trajectory (latched) for pdplus '
@@ -162,6 +181,39 @@ def summary(plan, limits, smooth=None) -> str:
     return '\n'.join(lines)
 
 
+def search(planner, spec: dict, a):
+    """The placement map of ``a`` (plan6's arguments), printed as it goes."""
+    from .six_axis_plan import place, placement_offsets
+    offsets = placement_offsets(a.place_lo, a.place_hi, a.place_n)
+    unit = 'J ' + ('mechanical' if a.energy_model == 'mechanical' else 'electrical')
+    print(f'placement: {len(offsets)} offsets, energy plans of {a.duration:g} s on grid '
+          f'{a.place_grid}, {a.energy_model} energy', flush=True)
+
+    def progress(k, m, pt):
+        d = ' '.join(f'{x:+.3f}' for x in pt.offset)
+        what = f'{pt.energy:10.2f} {unit}' if pt.energy == pt.energy else \
+            f'refused: {pt.reason[:120]}'
+        print(f'  [{k}/{m}] offset {d} m: {what}', flush=True)
+    res = place(planner, spec, offsets, a.duration, a.energy_model, a.place_grid, progress)
+    best = res.best
+    if best is not None:
+        worst = max(p.energy for p in res.planned)
+        print(f'placement: best offset {" ".join(f"{x:+.3f}" for x in best.offset)} m, '
+              f'{best.energy:.2f} {unit} on grid {a.place_grid} ({len(res.planned)} of '
+              f'{len(offsets)} planned; worst {worst:.2f}, {100 * (worst / best.energy - 1):.1f} '
+              '% more); planning it on the full grid', flush=True)
+    return res
+
+
+def placement_json(res) -> dict:
+    return {'energy_model': res.energy_model, 'duration_s': res.duration,
+            'grid_size': res.grid_size,
+            'best_offset_m': None if res.best is None else res.best.offset.tolist(),
+            'points': [{'offset_m': p.offset.tolist(),
+                        'energy_j': None if p.energy != p.energy else p.energy,
+                        'reason': p.reason} for p in res.points]}
+
+
 def main(args=None):
     argv = sys.argv[1:] if args is None else list(args)
     # ROS arguments (--ros-args ... [--]) are rclpy's (e.g. -r __ns:=/x for --publish)
@@ -172,6 +224,7 @@ def main(args=None):
         argv, ros_args = argv[:i] + argv[j + 1:], argv[i:j]
     a = parse_args(argv)
     a.ros_args = ros_args
+    import numpy as np
     if a.objective == 'energy' and not (a.duration > 0 and a.duration < float('inf')):
         print('plan6: an energy plan needs a finite --duration > 0 [s]', file=sys.stderr)
         return 2
@@ -179,16 +232,23 @@ def main(args=None):
         print(f'plan6: --grid must be 0 (the config\'s) or {MIN_GRID} .. {MAX_GRID}',
               file=sys.stderr)
         return 2
+    if a.place_n is not None and (
+            a.objective != 'energy' or min(a.place_n) < 1 or np.prod(a.place_n) > 1000
+            or not MIN_GRID <= a.place_grid <= MAX_GRID
+            or not all(np.isfinite(a.place_lo + a.place_hi))
+            or any(h < lo for lo, h in zip(a.place_lo, a.place_hi))):
+        print('plan6: --place-n needs an energy plan, 1 .. 1000 points, finite --place-lo <= '
+              f'--place-hi and --place-grid {MIN_GRID} .. {MAX_GRID}', file=sys.stderr)
+        return 2
     if a.tcp is not None and not all(abs(x) < 1.0 for x in a.tcp):
         print('plan6: --tcp must be finite and within 1 m of tool0', file=sys.stderr)
         return 2
-    import numpy as np
-
-    from .six_axis_plan import SixAxisPlanError, SixAxisPlanner, read_task_file
+    from .six_axis_plan import (SixAxisPlanError, SixAxisPlanner, read_task_file,
+                                task_from_spec)
     try:
         path, law = read_task_file(a.path_file)
         from irb_description.path import read_path_spec
-        spec = read_path_spec(a.path_file) if a.publish else None
+        spec = read_path_spec(a.path_file) if (a.publish or a.place_n) else None
     except SixAxisPlanError as exc:
         print(f'plan6: {exc}', file=sys.stderr)
         return 2
@@ -197,6 +257,15 @@ def main(args=None):
         from irb_description.six_axis import pose
         tcp = pose(np.eye(3), a.tcp)
     planner = SixAxisPlanner(tcp=tcp)
+    placement = None
+    if a.place_n is not None:
+        placement = search(planner, spec, a)
+        if placement.best is None:
+            print('plan6: refused: no placement in the box can be planned', file=sys.stderr)
+            return 1
+        from .six_axis_plan import translated_spec
+        spec = translated_spec(spec, placement.best.offset)
+        path, law = task_from_spec(spec)
     try:
         prob = planner.problem(path, law, a.grid or None, energy_model=a.energy_model)
         plan = planner.plan(prob, a.objective, a.duration)
@@ -206,7 +275,8 @@ def main(args=None):
     print(summary(plan, planner.limits, planner.smooth_limits))
     if a.json:
         tr = plan.trajectory
-        out = {'configuration': list(plan.configuration), 'objective': plan.objective,
+        out = {} if placement is None else {'placement': placement_json(placement)}
+        out.update({'configuration': list(plan.configuration), 'objective': plan.objective,
                'duration_s': plan.duration, 'min_duration_s': plan.min_duration,
                'energy_model': plan.energy_model,
                'energy_j': plan.energy, 'electrical_energy_j': plan.electrical_energy,
@@ -225,7 +295,7 @@ def main(args=None):
                'profile': {'theta': plan.profile.theta.tolist(),
                            'theta_dot': plan.profile.theta_dot.tolist()},
                'points': {k: np.asarray(tr[k]).tolist() for k in
-                          ('t', 'theta', 'q', 'qd', 'qdd')}}
+                          ('t', 'theta', 'q', 'qd', 'qdd')}})
         try:
             with open(a.json, 'w') as f:
                 json.dump(out, f)

@@ -608,3 +608,94 @@ class SixAxisPlanner:
         return SixAxisPlan(objective, profile, profile.duration, t_min, opt,
                            spent, iters, prob.build_time, traj, chk, prob.configuration, notes,
                            prob.energy_model)
+
+
+# --- placement ------------------------------------------------------------------------------
+#: the keys of a path mapping that hold positions [m] (moved by a placement); every other key
+#: (normals, radii, the orientation block's directions and rotations) is unchanged by a shift
+POSITION_KEYS = ('center', 'waypoints')
+
+
+def translated_spec(spec: dict, offset) -> dict:
+    """The path mapping ``spec`` (orientation block included) moved by ``offset`` (3,) [m]:
+    its centre or waypoints shifted; the tool-orientation law is unchanged by a translation
+    (fixed rotations, a plane's normal, slerp keyframes on theta)."""
+    d = np.asarray(offset, float)
+    if d.shape != (3,) or not np.all(np.isfinite(d)):
+        raise SixAxisPlanError(f'a placement offset is 3 finite numbers [m], not {offset!r}')
+    out = dict(spec)
+    for key in POSITION_KEYS:
+        if key in out and out[key] is not None:
+            v = np.asarray(out[key], float)
+            if v.shape[-1:] != (3,):
+                raise SixAxisPlanError(f"path '{key}' must hold points of 3 coordinates")
+            out[key] = (v + d).tolist()
+    return out
+
+
+@dataclass
+class PlacementPoint:
+    """One placement of the task: its offset (3,) [m] from the path file's, the played energy
+    [J] of the energy model asked for (NaN where refused) and the refusal's reason."""
+
+    offset: np.ndarray
+    energy: float
+    reason: str = ''
+    plan: SixAxisPlan | None = field(default=None, repr=False)
+
+
+@dataclass
+class SixAxisPlacement:
+    """A grid search over offsets of a six-axis task: every point, the best, on which grid."""
+
+    points: list
+    energy_model: str
+    duration: float
+    grid_size: int
+
+    @property
+    def planned(self) -> list:
+        return [p for p in self.points if np.isfinite(p.energy)]
+
+    @property
+    def best(self) -> PlacementPoint | None:
+        ok = self.planned
+        return min(ok, key=lambda p: p.energy) if ok else None
+
+
+def placement_offsets(lo, hi, n) -> np.ndarray:
+    """(M, 3) [m]: the grid of offsets in the box [lo, hi] with n (3,) points per axis (1:
+    the box's middle on that axis)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    n = [int(k) for k in n]
+    if lo.shape != (3,) or hi.shape != (3,) or np.any(hi < lo) or min(n) < 1:
+        raise SixAxisPlanError('placement box: lo <= hi (3 values each), n >= 1 per axis')
+    axes = [np.linspace(a, b, k) if k > 1 else np.array([0.5 * (a + b)])
+            for a, b, k in zip(lo, hi, n)]
+    return np.array(np.meshgrid(*axes, indexing='ij')).reshape(3, -1).T
+
+
+def place(planner: SixAxisPlanner, spec: dict, offsets, duration: float,
+          energy_model: str = 'electrical', grid_size: int = 40, progress=None
+          ) -> SixAxisPlacement:
+    """Energy plan of ``spec`` (a path mapping with an orientation block) moved by every
+    offset (M, 3) [m], each on the ``grid_size`` grid and checked as played; the energy of
+    ``energy_model`` compared (mechanical: the played mechanical energy; electrical*: the
+    played electrical energy). A placement that cannot be planned (unreachable, shorter than
+    its time-optimal duration, fails its check) is kept with its reason. ``progress(k, M,
+    point)`` after each."""
+    offsets = np.atleast_2d(np.asarray(offsets, float))
+    points = []
+    for k, d in enumerate(offsets):
+        try:
+            path, law = task_from_spec(translated_spec(spec, d))
+            prob = planner.problem(path, law, grid_size, energy_model=energy_model)
+            plan = planner.plan(prob, 'energy', duration)
+            e = plan.energy if energy_model == 'mechanical' else plan.electrical_energy
+            pt = PlacementPoint(d.copy(), float(e), plan=plan)
+        except SixAxisPlanError as exc:
+            pt = PlacementPoint(d.copy(), float('nan'), str(exc))
+        points.append(pt)
+        if progress is not None:
+            progress(k + 1, len(offsets), pt)
+    return SixAxisPlacement(points, energy_model, float(duration), int(grid_size))

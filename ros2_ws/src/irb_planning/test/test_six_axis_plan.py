@@ -130,7 +130,9 @@ def test_plan6_refuses_bad_files_in_one_line(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and words in err, err
     assert main(['--path-file', str(three_axis)]) == 2          # energy without a duration
     assert '--duration' in capsys.readouterr().err
-    for bad in (['--grid', '5'], ['--tcp', '0', '0', 'nan'], ['--duration', 'inf']):
+    for bad in (['--grid', '5'], ['--tcp', '0', '0', 'nan'], ['--duration', 'inf'],
+                ['--place-n', '0', '1', '1'], ['--place-n', '2', '2', '2', '--place-lo', '0',
+                                               '0', '0', '--place-hi', '0', '-1', '0']):
         assert main(['--path-file', str(three_axis), '--duration', '2'] + bad) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
@@ -242,3 +244,30 @@ def test_electrical_energy_model(planned):
     assert plan.optimizer_energy == pytest.approx(plan.electrical_energy, rel=1e-2)
     assert plan.electrical_energy <= mech.electrical_energy * (1 + 1e-4), (
         plan.electrical_energy, mech.electrical_energy)
+
+
+def test_placement_moves_the_task_and_keeps_refusals(planned):
+    """Six-axis placement: a task moved by an offset is the same path shifted with the same
+    tool orientations; the search plans every offset, keeps an unreachable one with its
+    reason, and the best is the planned one, with the energy of the same plan made directly
+    (the fixture's, same grid and duration)."""
+    from irb_planning.six_axis_plan import place, placement_offsets, translated_spec
+    planner, path, law, plan, _ = planned
+    spec = {**ARC, 'orientation': {'law': 'path_normal'}}
+    d = np.array([0.02, -0.03, 0.01])
+    moved, moved_law = task_from_spec(translated_spec(spec, d))
+    th = np.linspace(0.0, 2 * np.pi, 9)
+    np.testing.assert_allclose(moved.point(th), path.point(th) + d, atol=1e-12)
+    np.testing.assert_allclose(moved_law.rotation(th), law.rotation(th), atol=1e-12)
+    assert spec['center'] == ARC['center']                       # the caller's spec untouched
+    grid = placement_offsets([0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2, 1, 1])
+    np.testing.assert_array_equal(grid, [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    seen = []
+    res = place(planner, spec, grid, DURATION, 'mechanical', GRID,
+                progress=lambda k, m, pt: seen.append((k, m)))
+    assert seen == [(1, 2), (2, 2)]
+    far = res.points[1]
+    assert not np.isfinite(far.energy) and 'unreachable' in far.reason
+    assert res.best is res.points[0] and res.best.energy == plan.energy
+    with pytest.raises(SixAxisPlanError):
+        translated_spec(spec, [0.0, np.nan, 0.0])
