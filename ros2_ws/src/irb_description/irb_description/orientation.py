@@ -10,7 +10,12 @@ it makes the TCP pose T(theta) (``tool_poses``). Laws:
   tool x along the path's tangent (``x_mode`` 'tangent') or a fixed direction projected into
   the plane (``x_mode`` 'fixed': the tool does not spin about its own axis);
 * ``KeyframeSlerp``: spherical-linear interpolation between rotations at given theta
-  (scipy's ``Slerp``), constant before the first and after the last keyframe.
+  (scipy's ``Slerp``), constant before the first and after the last keyframe. ``easing``
+  'smooth' (the default) runs each segment's slerp fraction along the quintic smootherstep
+  6u^5 - 15u^4 + 10u^3 of theta: the rotation's rate and its derivative are zero at every
+  keyframe, so the joints' path is twice differentiable there and a jerk-limited motion passes
+  a keyframe at speed; 'linear' is plain slerp (constant rate between keyframes, a step of
+  the rate at each inner keyframe: the joints' speeds would step at a path speed > 0).
 
 ``joint_path6`` solves the closed-form IK (``six_axis``) at every sample in one
 configuration, keeps the joints continuous (2 pi shifts of q1, q3, q4, q6 chosen sample to
@@ -147,11 +152,18 @@ class PathFrame(OrientationLaw):
         return frame_from_axes(np.broadcast_to(self._z, t.shape), t)
 
 
+EASINGS = ('smooth', 'linear')
+
+
 class KeyframeSlerp(OrientationLaw):
     """Slerp between rotations ``rotations`` (K, 3, 3) at increasing ``thetas`` (K,) [rad]
-    (K >= 2); the first / last rotation before / after the keyframes."""
+    (K >= 2); the first / last rotation before / after the keyframes; ``easing`` (module
+    docstring) 'smooth' or 'linear'."""
 
-    def __init__(self, thetas, rotations):
+    def __init__(self, thetas, rotations, easing: str = 'smooth'):
+        if easing not in EASINGS:
+            raise ValueError(f'easing must be one of {list(EASINGS)}, got {easing!r}')
+        self.easing = easing
         th = np.asarray(thetas, float)
         R = np.asarray(rotations, float)
         if th.ndim != 1 or th.size < 2 or np.any(np.diff(th) <= 0) or \
@@ -163,8 +175,20 @@ class KeyframeSlerp(OrientationLaw):
         self._slerp = Slerp(th, Rotation.from_matrix(R))
 
     def rotation(self, theta) -> np.ndarray:
-        theta = np.atleast_1d(np.asarray(theta, float))
-        return self._slerp(np.clip(theta, self.thetas[0], self.thetas[-1])).as_matrix()
+        th = np.clip(np.atleast_1d(np.asarray(theta, float)), self.thetas[0], self.thetas[-1])
+        if self.easing == 'smooth':
+            k = np.clip(np.searchsorted(self.thetas, th, side='right') - 1, 0,
+                        self.thetas.size - 2)
+            lo, span = self.thetas[k], np.diff(self.thetas)[k]
+            u = (th - lo) / span
+            th = np.clip(lo + span * u ** 3 * (10.0 + u * (-15.0 + 6.0 * u)),
+                         self.thetas[0], self.thetas[-1])          # round-off at the ends
+        return self._slerp(th).as_matrix()
+
+    @property
+    def inner_keyframes(self) -> np.ndarray:
+        """The keyframes' theta strictly inside (0, 2 pi) [rad]."""
+        return self.thetas[(self.thetas > 0.0) & (self.thetas < 2 * np.pi)]
 
 
 #: key of a path mapping's optional orientation block (``orientation_from_spec``)
@@ -193,14 +217,15 @@ def orientation_from_spec(spec: dict, path: PathBase) -> OrientationLaw:
 
     law 'fixed': rpy [rad] (URDF convention, R = Rz Ry Rx) or z (and x) tool axes;
     'path_normal': normal (optional), approach ('against'), x_mode ('tangent'), x_ref;
-    'slerp': keyframes [{theta [rad], rpy or z/x}, ...] (theta increasing, >= 2).
+    'slerp': keyframes [{theta [rad], rpy or z/x}, ...] (theta increasing, >= 2), easing
+    ('smooth', the default, or 'linear': ``KeyframeSlerp``).
     ValueError with one line naming what is wrong.
     """
     if not isinstance(spec, dict):
         raise ValueError('an orientation spec must be a mapping with a "law"')
     law = spec.get('law')
     known = {'fixed': {'rpy', 'z', 'x'}, 'path_normal': {'normal', 'approach', 'x_mode', 'x_ref'},
-             'slerp': {'keyframes'}}
+             'slerp': {'keyframes', 'easing'}}
     if law not in known:
         raise ValueError(f'orientation law must be one of {list(LAWS)}, got {law!r}')
     extra = set(spec) - known[law] - {'law'}
@@ -225,7 +250,8 @@ def orientation_from_spec(spec: dict, path: PathBase) -> OrientationLaw:
                 raise ValueError(f'keyframe {i} needs theta [rad]')
             thetas.append(float(f['theta']))
         return KeyframeSlerp(thetas, [_rotation_spec(f, f'keyframe {i}')
-                                      for i, f in enumerate(frames)])
+                                      for i, f in enumerate(frames)],
+                             spec.get('easing', 'smooth'))
     except (TypeError, ValueError) as exc:
         raise ValueError(f'orientation {law}: {exc}') from None
 

@@ -6,8 +6,8 @@ from numpy.testing import assert_allclose
 from scipy.spatial.transform import Rotation
 
 from irb_description.orientation import (FixedOrientation, KeyframeSlerp, OrientationLaw,
-                                         PathFrame, joint_path6, path_normal, pose_errors,
-                                         tool_poses)
+                                         PathFrame, joint_path6, orientation_from_spec,
+                                         path_normal, pose_errors, tool_poses)
 from irb_description.path import (ArcPath, LinePath, SplinePath, rectangle_path,
                                   thesis_circle)
 from irb_description.six_axis import (SixAxisKinematics, UnreachablePoseError, pose, rot_x,
@@ -281,3 +281,33 @@ def test_a_limit_crossed_between_samples_is_refused(kin):
     assert np.all(curve.q(coarse)[:, 4] < kin.upper[4]) and kin.upper[4] < 1.92 + 0.089
     with pytest.raises(UnreachablePoseError, match=r"\['joint_5'\] outside their limits"):
         joint_path6(kin, curve, law, coarse, configuration=('front', 'up', 'noflip'))
+
+
+def test_smooth_slerp_rests_its_rate_at_keyframes():
+    """easing 'smooth' (the default): keyframes hit, the middle of a segment halfway (the
+    smootherstep's 1/2), and the rotation rate zero at an inner keyframe (one-sided
+    differences), where plain slerp ('linear') has a rate step."""
+    Ra, Rb, Rc = DOWN, rot_z(0.8) @ rot_y(0.3) @ DOWN, rot_x(0.5) @ DOWN
+    th = [0.0, 2.0, 3.0]
+    smooth = KeyframeSlerp(th, [Ra, Rb, Rc])
+    linear = KeyframeSlerp(th, [Ra, Rb, Rc], easing='linear')
+    assert smooth.easing == 'smooth'
+    for law in (smooth, linear):
+        R = law.rotation(np.array(th))
+        for k, Rk in enumerate((Ra, Rb, Rc)):
+            assert_allclose(R[k], Rk, atol=1e-12)
+    mid = smooth.rotation(np.array([1.0]))[0]
+    assert rotation_error(Ra, mid) == pytest.approx(rotation_error(Ra, Rb) / 2, abs=1e-12)
+    h = 1e-4
+
+    def rate(law, a, b):
+        Ra_, Rb_ = law.rotation(np.array([a, b]))
+        return rotation_error(Ra_, Rb_) / h
+    for side in ((2.0 - h, 2.0), (2.0, 2.0 + h)):
+        assert rate(smooth, *side) < 1e-6                # ~ h^2: zero rate at the keyframe
+        assert rate(linear, *side) > 0.1                 # the plain slerp's constant rate
+    with pytest.raises(ValueError, match='easing'):
+        KeyframeSlerp(th, [Ra, Rb, Rc], easing='cubic')
+    assert orientation_from_spec({'law': 'slerp', 'easing': 'linear', 'keyframes': [
+        {'theta': 0.0, 'rpy': [np.pi, 0, 0]}, {'theta': 1.0, 'rpy': [np.pi, 0.2, 0]}]},
+        LinePath(np.array([0.6, 0, 0.3]), np.array([0.7, 0, 0.3]))).easing == 'linear'

@@ -395,6 +395,13 @@ class SixAxisPlanner:
                                    f'not {energy_model!r}')
         electrical = None if energy_model == 'mechanical' else \
             self.electrical_model(energy_model)
+        steps = getattr(law, 'inner_keyframes', np.zeros(0))
+        if s.jerk_limits and getattr(law, 'easing', '') == 'linear' and steps.size:
+            raise SixAxisPlanError(
+                'slerp with easing linear: the tool\'s rotation rate steps at the keyframe(s) '
+                'theta = ' + ', '.join(f'{x:.4f}' for x in steps) + ' rad, so the joint speeds '
+                'would step there at any path speed > 0, which the jerk limits (jerk_limits) '
+                'forbid: use easing smooth (the default) or turn jerk_limits off')
         t0 = time.perf_counter()
         ref = np.linspace(0.0, 2 * np.pi, s.reference_samples)
         try:

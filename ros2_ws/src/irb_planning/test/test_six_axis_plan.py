@@ -271,3 +271,21 @@ def test_placement_moves_the_task_and_keeps_refusals(planned):
     assert res.best is res.points[0] and res.best.energy == plan.energy
     with pytest.raises(SixAxisPlanError):
         translated_spec(spec, [0.0, np.nan, 0.0])
+
+
+def test_linear_slerp_keyframe_refused_with_its_reason():
+    """Plain slerp steps the rotation rate at an inner keyframe: with the jerk limits on the
+    planner says so (instead of an infeasible NLP); the default smooth easing plans."""
+    planner = SixAxisPlanner()
+    frames = [{'theta': 0.0, 'rpy': [np.pi, 0.0, 0.0]},
+              {'theta': float(np.pi), 'rpy': [np.pi, 0.3, 0.0]},
+              {'theta': float(2 * np.pi), 'rpy': [np.pi, 0.0, 0.3]}]
+    line = dict(type='line', waypoints=[[0.55, -0.25, 0.25], [0.75, 0.2, 0.45]])
+    path, law = task_from_spec({**line, 'orientation': {'law': 'slerp', 'easing': 'linear',
+                                                        'keyframes': frames}})
+    with pytest.raises(SixAxisPlanError, match=r'rotation rate steps .*theta = 3\.1416'):
+        planner.problem(path, law, GRID)
+    path, law = task_from_spec({**line, 'orientation': {'law': 'slerp', 'keyframes': frames}})
+    assert law.easing == 'smooth'
+    plan = planner.plan(planner.problem(path, law, GRID), 'energy', 2.2)
+    assert plan.check.ok and plan.check.orientation_error < np.radians(0.05)
