@@ -70,6 +70,7 @@ MODE_HOLD = 5
 MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME: 'time',
               MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
 MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
+DITHER_MODES = (MODE_PATH, MODE_TIME, MODE_HOLD)     # where the stiction dither acts
 
 # events of the state machine
 EV_ENABLE = 'enable'          # operator (or the documented auto-enable at start-up)
@@ -248,6 +249,21 @@ class ControllerConfig:
     #: sticks, Coulomb as soon as it slides, as the friction itself (for creeping joints);
     #: None = False on every joint
     stribeck_measured: tuple | None = None
+    #: stiction dither (n joints, ``_step_n`` only; None = none): a square wave of +-a_i
+    #: [N m] per joint, period ``dither_period_samples`` (even, >= 2) controller samples,
+    #: added to the command only while a command is published in PATH, TIME or HOLD (never
+    #: in the ramp, IDLE or STOPPED; its phase restarts on enable, stop, motors off/on); it
+    #: goes through the rate and torque limits like the rest of the command. The classical
+    #: remedy for stick-slip: the joint's friction is averaged over the dither's swing.
+    #: with ``stribeck_measured``: the measured speed the hump takes is carried over the
+    #: delay by a one-joint stick-slip model of the commands still in flight (their torque
+    #: beyond the model terms, the reference accelerations, M_ii, the controller's friction
+    #: map; a joint measured below ``stiction_rest_speed_rad_s`` starts at rest): the hump
+    #: switches off when the joint is predicted to have broken away, not 3 samples later
+    stiction_prediction: bool = False
+    stiction_rest_speed_rad_s: float = 0.003      # [rad/s]
+    dither_amplitude_nm: tuple | None = None      # [N m]
+    dither_period_samples: int = 2                # [samples]
 
     @property
     def joints(self) -> int:
@@ -281,6 +297,15 @@ class ControllerConfig:
                 or any(not isinstance(x, (bool, np.bool_)) for x in self.stribeck_measured)):
             raise ValueError(f'stribeck_measured must be {n} booleans, got '
                              f'{self.stribeck_measured}')
+        if self.dither_amplitude_nm is not None:
+            v = np.asarray(self.dither_amplitude_nm, float)
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'dither_amplitude_nm must be {n} finite numbers >= 0, got '
+                                 f'{v}')
+        if (not isinstance(self.dither_period_samples, (int, np.integer))
+                or self.dither_period_samples < 2 or self.dither_period_samples % 2):
+            raise ValueError(f'dither_period_samples must be an even integer >= 2, got '
+                             f'{self.dither_period_samples!r}')
         if (self.ki is None) != (self.integral_limit_nm is None):
             raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
@@ -411,6 +436,11 @@ class PdPlusController:
         self._i_lim = None if c.ki is None else np.asarray(c.integral_limit_nm,
                                                            float).tolist()
         self._integral = [0.0] * n
+        # stiction dither (ControllerConfig.dither_amplitude_nm): amplitudes, sample counter
+        self._dither = (None if c.dither_amplitude_nm is None
+                        or not any(c.dither_amplitude_nm)
+                        else [float(x) for x in c.dither_amplitude_nm])
+        self._dither_k = 0
         self._hump_measured = (None if c.stribeck_measured is None
                                or not any(c.stribeck_measured)
                                else [bool(x) for x in c.stribeck_measured])
@@ -451,6 +481,9 @@ class PdPlusController:
         self._pending_tracker = None
         self._use_path(path)
         self._friction_par = _parametric_friction(friction)
+        self._stick_pred = bool(c.stiction_prediction and self._hump_measured is not None
+                                and self._friction_par is not None)
+        self._pred_flight: deque = deque(maxlen=max(c.prediction_samples, 1))
         if self._hump_measured is not None and friction is not None \
                 and self._friction_par is None:
             raise ValueError('stribeck_measured needs a parametric friction map (no '
@@ -531,7 +564,9 @@ class PdPlusController:
         self._enable_requested = True
         self._halt_T = self._halt = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
         return True, f'enabled: {why}'
@@ -547,7 +582,9 @@ class PdPlusController:
         self._halt_T = self._halt = None
         self._prev_tau = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
 
     def hold(self) -> tuple[bool, str]:
         """Controlled stop (the ``hold`` event): a moving reference (ramp, path, time)
@@ -593,7 +630,9 @@ class PdPlusController:
             self._halt_T = self._halt = None
             self._prev_tau = None
             self._in_flight.clear()
+            self._pred_flight.clear()
             self._integral = [0.0] * self.n
+            self._dither_k = 0
         return True, why
 
     def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
@@ -606,7 +645,9 @@ class PdPlusController:
         self._hold = np.asarray(q, float).tolist()
         self._prev_tau = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
         return True, why
 
     @property
@@ -632,7 +673,8 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
-        if self.n != 3 or self._ki is not None or self._hump_measured:
+        if (self.n != 3 or self._ki is not None or self._hump_measured
+                or self._dither is not None):
             return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -927,8 +969,19 @@ class PdPlusController:
         Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ qd_ref_a).tolist()
         g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
         tm = [Ma[i] + Cb[i] + g[i] for i in R]
+        pf = self._pred_flight
         if self.friction is not None:
-            tf = self._friction_torque_n(qd_ref, uu)
+            xs = uu
+            if self._stick_pred and len(pf) == self.config.prediction_samples:
+                xs = list(uu)
+                mdg = M.diagonal().tolist()
+                for i in R:
+                    if self._hump_measured[i]:
+                        v = wl[i]
+                        for u_j, a_j in pf:
+                            v = self._slide(i, v, u_j[i], a_j[i], mdg[i])
+                        xs[i] = v
+            tf = self._friction_torque_n(qd_ref, uu, xs)
         else:
             tf = zero
         kp, kd = self._gains(M.diagonal().tolist())
@@ -940,6 +993,13 @@ class PdPlusController:
             lim = self._i_lim
             i_new = [min(max(i_old[i] + ki[i] * e[i] * T, -lim[i]), lim[i]) for i in R]
             fb = [fb[i] + i_new[i] for i in R]
+        dith = self._dither
+        if dith is not None and self.mode in DITHER_MODES:     # stiction dither: +-a_i
+            k = self._dither_k
+            P = self.config.dither_period_samples
+            sg = 1.0 if k % P < P // 2 else -1.0
+            tf = [tf[i] + sg * dith[i] for i in R]
+            self._dither_k = k + 1
         tau = [tm[i] + tf[i] + fb[i] for i in R]
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
@@ -966,9 +1026,36 @@ class PdPlusController:
         self._last_qd_ref = qd_ref
         if self._commanded:
             fl.append(tuple(qdd_ref))
+        if self._stick_pred:
+            pf.append(([tau[i] - tm[i] for i in R], qdd_ref))
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
+
+    def _slide(self, i: int, v: float, u: float, a: float, m: float, substeps: int = 4
+               ) -> float:
+        """Joint i's speed v [rad/s] one period later under the command in flight: u [N m]
+        its torque beyond the model terms, a [rad/s^2] the reference acceleration it was
+        computed for, m [kg m^2] M_ii; the controller's parametric friction, semi-implicit
+        stick-slip in ``substeps`` (``stiction_prediction``)."""
+        fcp, fcn, hp, hn, vs, fv, off = self._friction_par[i]
+        h = self.config.period_s / substeps
+        if abs(v) < self.config.stiction_rest_speed_rad_s:
+            v = 0.0
+        exp = math.exp
+        for _ in range(substeps):
+            if v == 0.0:
+                drive = m * a + u - off     # what the friction must hold for the joint to rest
+                if -(fcn + hn) <= drive <= fcp + hp:
+                    continue
+                fr = fcp + hp if drive > 0.0 else -(fcn + hn)
+                v = h * (drive - fr) / m
+                continue
+            fr = (fcp + hp * exp(-(v / vs) ** 2) if v > 0.0
+                  else -(fcn + hn * exp(-(v / vs) ** 2))) + fv * v + off
+            vn = v + h * (a + (u - fr) / m)
+            v = 0.0 if vn * v < 0.0 else vn
+        return v
 
     def _rejected(self) -> ControlOutput:
         self.rejected_inputs += 1
@@ -976,6 +1063,8 @@ class PdPlusController:
         # flight once more (as the plant's delay line repeats it)
         if self._commanded and self._in_flight:
             self._in_flight.append(self._in_flight[-1])
+        if self._stick_pred and self._pred_flight:
+            self._pred_flight.append(self._pred_flight[-1])
         n = self.n
         return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
                              rejected_input=True, **self._nan_fields())
@@ -995,14 +1084,17 @@ class PdPlusController:
         theta = (direction * (ang - start)) % self._two_pi
         return 0.0 if theta >= self._two_pi else theta
 
-    def _friction_torque_n(self, qd_ref: list, qd_p) -> list:
-        """``_friction_torque`` on n joints (the same operations per joint)."""
+    def _friction_torque_n(self, qd_ref: list, qd_p, qd_hump=None) -> list:
+        """``_friction_torque`` on n joints (the same operations per joint); ``qd_hump``: the
+        speeds the ``stribeck_measured`` joints' hump takes (default qd_p)."""
         n = self.n
         a = self.config.friction_blend_a
         alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
         v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
         par = self._friction_par
         measured = self._hump_measured or [False] * n
+        if qd_hump is None:
+            qd_hump = qd_p
         if par is None:     # (stribeck_measured is refused with such maps at construction)
             return self.friction.torque(np.array(v)).tolist()
         out = []
@@ -1010,7 +1102,7 @@ class PdPlusController:
         for i in range(n):
             fcp, fcn, hp, hn, vs, fv, off = par[i]
             x = v[i]
-            xs = qd_p[i] if measured[i] else x
+            xs = qd_hump[i] if measured[i] else x
             e = float(exp(-((xs / vs) ** 2)))
             sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
             tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
