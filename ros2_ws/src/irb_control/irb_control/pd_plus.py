@@ -306,6 +306,14 @@ class ControllerConfig:
                 or self.dither_period_samples < 2 or self.dither_period_samples % 2):
             raise ValueError(f'dither_period_samples must be an even integer >= 2, got '
                              f'{self.dither_period_samples!r}')
+        if not (math.isfinite(self.stiction_rest_speed_rad_s)
+                and self.stiction_rest_speed_rad_s >= 0):
+            raise ValueError(f'stiction_rest_speed_rad_s must be >= 0, got '
+                             f'{self.stiction_rest_speed_rad_s}')
+        if self.stiction_prediction and not (self.stribeck_measured is not None
+                                             and any(self.stribeck_measured)):
+            raise ValueError('stiction_prediction needs stribeck_measured joints (it predicts '
+                             'the speed their Stribeck term takes)')
         if (self.ki is None) != (self.integral_limit_nm is None):
             raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
