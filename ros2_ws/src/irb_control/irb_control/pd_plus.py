@@ -71,6 +71,7 @@ MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME
               MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
 MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
 DITHER_MODES = (MODE_PATH, MODE_TIME, MODE_HOLD)     # where the stiction dither acts
+_SLIDE_SUBSTEPS = 4          # substeps per period of the stiction prediction's joint model
 
 # events of the state machine
 EV_ENABLE = 'enable'          # operator (or the documented auto-enable at start-up)
@@ -492,6 +493,9 @@ class PdPlusController:
         self._stick_pred = bool(c.stiction_prediction and self._hump_measured is not None
                                 and self._friction_par is not None)
         self._pred_flight: deque = deque(maxlen=max(c.prediction_samples, 1))
+        self._hump_joints = [i for i in range(self.n) if self._hump_measured
+                             and self._hump_measured[i]]
+        self._slide_h = c.period_s / _SLIDE_SUBSTEPS
         if self._hump_measured is not None and friction is not None \
                 and self._friction_par is None:
             raise ValueError('stribeck_measured needs a parametric friction map (no '
@@ -983,12 +987,8 @@ class PdPlusController:
             if self._stick_pred and len(pf) == self.config.prediction_samples:
                 xs = list(uu)
                 mdg = M.diagonal().tolist()
-                for i in R:
-                    if self._hump_measured[i]:
-                        v = wl[i]
-                        for u_j, a_j in pf:
-                            v = self._slide(i, v, u_j[i], a_j[i], mdg[i])
-                        xs[i] = v
+                for i in self._hump_joints:
+                    xs[i] = self._predict_speed(i, wl[i], mdg[i], pf)
             tf = self._friction_torque_n(qd_ref, uu, xs)
         else:
             tf = zero
@@ -1040,29 +1040,41 @@ class PdPlusController:
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
 
-    def _slide(self, i: int, v: float, u: float, a: float, m: float, substeps: int = 4
-               ) -> float:
-        """Joint i's speed v [rad/s] one period later under the command in flight: u [N m]
+    def _slide(self, i: int, v: float, u: float, a: float, m: float) -> float:
+        """Joint i's speed v [rad/s] one period later under one command in flight: u [N m]
         its torque beyond the model terms, a [rad/s^2] the reference acceleration it was
-        computed for, m [kg m^2] M_ii; the controller's parametric friction, semi-implicit
-        stick-slip in ``substeps`` (``stiction_prediction``)."""
+        computed for, m [kg m^2] M_ii (``_predict_speed`` of one command)."""
+        return self._predict_speed(i, v, m, ((u, a),), False)
+
+    def _predict_speed(self, i: int, v: float, m: float, flight, lists: bool = True
+                       ) -> float:
+        """Joint i's speed v [rad/s] carried over the commands in ``flight`` (oldest first;
+        each (u, a) as in ``_slide``, per-joint lists of which joint i's are taken, or with
+        ``lists`` False joint i's floats), M_ii = m [kg m^2]: one period
+        each in ``_SLIDE_SUBSTEPS`` semi-implicit stick-slip substeps of the controller's
+        parametric friction (``stiction_prediction``); a speed below
+        ``stiction_rest_speed_rad_s`` at a command's start is rest."""
         fcp, fcn, hp, hn, vs, fv, off = self._friction_par[i]
-        h = self.config.period_s / substeps
-        if abs(v) < self.config.stiction_rest_speed_rad_s:
-            v = 0.0
+        s_pos, s_neg = fcp + hp, -(fcn + hn)           # the breakaway levels
+        h = self._slide_h
+        rest = self.config.stiction_rest_speed_rad_s
         exp = math.exp
-        for _ in range(substeps):
-            if v == 0.0:
-                drive = m * a + u - off     # what the friction must hold for the joint to rest
-                if -(fcn + hn) <= drive <= fcp + hp:
+        for u, a in flight:
+            if lists:
+                u, a = u[i], a[i]
+            if abs(v) < rest:
+                v = 0.0
+            for _ in range(_SLIDE_SUBSTEPS):
+                if v == 0.0:
+                    drive = m * a + u - off     # what friction must hold for the joint to rest
+                    if s_neg <= drive <= s_pos:
+                        break                   # at rest for the rest of this command
+                    v = h * (drive - (s_pos if drive > 0.0 else s_neg)) / m
                     continue
-                fr = fcp + hp if drive > 0.0 else -(fcn + hn)
-                v = h * (drive - fr) / m
-                continue
-            fr = (fcp + hp * exp(-(v / vs) ** 2) if v > 0.0
-                  else -(fcn + hn * exp(-(v / vs) ** 2))) + fv * v + off
-            vn = v + h * (a + (u - fr) / m)
-            v = 0.0 if vn * v < 0.0 else vn
+                fr = (fcp + hp * exp(-(v / vs) ** 2) if v > 0.0
+                      else -(fcn + hn * exp(-(v / vs) ** 2))) + fv * v + off
+                vn = v + h * (a + (u - fr) / m)
+                v = 0.0 if vn * v < 0.0 else vn
         return v
 
     def _rejected(self) -> ControlOutput:
