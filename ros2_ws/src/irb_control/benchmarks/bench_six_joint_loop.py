@@ -18,6 +18,15 @@ costs no sample and causes no stop) and pdplus on simulated time, both on the bu
 joint 1, ``--repeats`` runs of each joint count interleaved (3, 6, 3, 6, ...), fresh processes
 each; only samples that sent a command (modes ramp, time, hold) count. Median, p90, p99 per
 run and pooled, and their six/three ratios. Writes results/<--out>.json.
+
+``--paired``: the same figure without a simulator and in the very same moments: two pdplus
+processes, three and six joints, each in a namespace of its own, driven by this script
+alternately sample by sample (a joint state stamped now to one, its command awaited, then
+to the other; the order swapped every period; ``--rate`` pairs per second), both on the
+built-in sine of joint 1 (time-driven, 0.01 rad: the state stays at the start pose, the
+tracking-error limit is 1 rad and the watchdog 1000 samples, so that neither stops). The
+simulator's own cost (six joints: ~4x three) is then out of pdplus's figure. Also the round
+trip state -> command as this script sees it. Writes results/<--out>.json.
 """
 import argparse
 import json
@@ -125,6 +134,175 @@ def lockstep_run(joints: int, seconds: float, timeout: float = 120.0) -> dict:
     return out
 
 
+def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
+               timeout: float = 120.0) -> dict:
+    """``--paired`` (module docstring): pdplus's step_duration [ms] and the round trip [ms]
+    per sample of each joint count, over ``seconds`` after ``warmup_s``."""
+    import subprocess
+    import tempfile
+    import time
+    import uuid
+
+    import numpy as np
+    import rclpy
+    from irb_description.node_main import state_pub_qos, state_qos
+    from irb_interfaces.msg import ControllerState
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    from irb_control.process_group import stop_sessions
+    uid = uuid.uuid4().hex[:6]
+    ns = {3: f'/pair3{uid}', 6: f'/pair6{uid}'}
+    q0 = {3: [0.0, 0.9, 0.25], 6: [0.0, 0.6, 0.2, 0.0, -0.5, 0.0]}
+    common = ['-p', 'auto_enable:=true', '-p', 'require_axis_status:=false',
+              '-p', 'builtin_profile:=sine', '-p', 'sine_amplitude_rad:=0.01',
+              '-p', 'sine_cycles:=100000.0', '-p', 'watchdog_missed_samples:=1000']
+    extra = {3: ['-p', 'max_tracking_error_rad:=[1.0,1.0,1.0]'],
+             6: six_joint_args() + ['-p', 'max_tracking_error_rad:=[1.0,1.0,1.0,1.0,1.0,1.0]']}
+    logs = []
+
+    def popen(cmd):
+        f = tempfile.TemporaryFile('w+')
+        logs.append(f)
+        return subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, text=True,
+                                start_new_session=True)
+    procs = [popen(['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-r',
+                    f'__ns:={ns[n]}', *common, *extra[n]]) for n in (3, 6)]
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')))
+    node = rclpy.create_node(f'pair_{uid}', context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    pubs, got, raw, rtt = {}, {}, {3: [], 6: []}, {3: [], 6: []}
+    sent_at = {}
+    for n in (3, 6):
+        pubs[n] = node.create_publisher(JointState, f'{ns[n]}/joint_states', state_pub_qos())
+
+        def on_cmd(_m, n=n):
+            got[n] = True
+            rtt[n].append(time.perf_counter() - sent_at[n])
+        node.create_subscription(JointState, f'{ns[n]}/torque_command', on_cmd, state_qos(),
+                                 raw=True)
+        node.create_subscription(ControllerState, f'{ns[n]}/controller_state', raw[n].append,
+                                 state_qos(), raw=True)
+    names = {n: [f'joint_{i}' for i in range(1, n + 1)] for n in (3, 6)}
+
+    def send(n):
+        m = JointState(name=names[n], position=q0[n], velocity=[0.0] * n)
+        s_ = time.time()
+        m.header.stamp.sec, m.header.stamp.nanosec = int(s_), int((s_ % 1.0) * 1e9)
+        got[n] = False
+        sent_at[n] = time.perf_counter()
+        pubs[n].publish(m)
+    out = {'load_before': [round(x, 2) for x in os.getloadavg()]}
+    period = 1.0 / rate_hz
+    try:
+        deadline = time.monotonic() + timeout     # until both answer (discovery, enable)
+        while time.monotonic() < deadline and not (raw[3] and raw[6] and rtt[3] and rtt[6]):
+            for n in (3, 6):
+                send(n)
+            t_end = time.monotonic() + period
+            while time.monotonic() < t_end:
+                ex.spin_once(timeout_sec=max(t_end - time.monotonic(), 0.0))
+            if any(p.poll() is not None for p in procs):
+                raise RuntimeError('a pdplus ended')
+        start = {n: len(raw[n]) for n in (3, 6)}
+        t0 = time.monotonic()
+        k = 0
+        marks = None
+        while time.monotonic() - t0 < warmup_s + seconds:
+            if marks is None and time.monotonic() - t0 >= warmup_s:
+                marks = {n: (len(raw[n]), len(rtt[n])) for n in (3, 6)}
+            t_next = time.monotonic() + period
+            for n in ((3, 6) if k % 2 == 0 else (6, 3)):
+                send(n)
+                t_ans = time.monotonic() + 0.05
+                while not got[n] and time.monotonic() < t_ans:
+                    ex.spin_once(timeout_sec=0.005)
+            k += 1
+            while time.monotonic() < t_next:
+                ex.spin_once(timeout_sec=max(t_next - time.monotonic(), 0.0))
+        out['pairs_sent'] = k
+        del start
+    except RuntimeError as exc:
+        out['error'] = str(exc)
+        marks = None
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        stop_sessions(procs)
+        if marks is None:
+            for n, f in zip((3, 6), logs):
+                f.seek(0)
+                out[f'pdplus{n}_log_tail'] = f.read().strip().splitlines()[-5:]
+        for f in logs:
+            f.close()
+    out['load_after'] = [round(x, 2) for x in os.getloadavg()]
+    if marks is None:
+        return out
+    for n in (3, 6):
+        states = [deserialize_message(b, ControllerState) for b in raw[n][marks[n][0]:]]
+        dur = np.array([s.step_duration for s in states
+                        if s.mode in (1, 3, 5) and len(s.tau_command) == n]) * 1e3
+        rt = np.array(rtt[n][marks[n][1]:]) * 1e3
+        out[f'{n}_joints'] = {
+            'samples': int(dur.size), 'modes_seen': sorted({int(s.mode) for s in states}),
+            'step_ms': dur.tolist(), 'round_trip_ms': rt.tolist()}
+    return out
+
+
+def _stats(x) -> dict:
+    import numpy as np
+    x = np.asarray(x, float)
+    if not x.size:
+        return {'samples': 0}
+    return {'samples': int(x.size), 'median_ms': float(np.median(x)),
+            'p90_ms': float(np.percentile(x, 90)), 'p99_ms': float(np.percentile(x, 99)),
+            'max_ms': float(x.max())}
+
+
+def main_paired(a) -> int:
+    import numpy as np
+    out = {'benchmark': "pdplus's own step_duration per sample, 3 and 6 joints driven "
+                        'alternately sample by sample (--paired)', 'rate_hz': a.rate,
+           'load_average_before': os.getloadavg(), 'runs': []}
+    pooled = {3: {'step_ms': [], 'round_trip_ms': []}, 6: {'step_ms': [], 'round_trip_ms': []}}
+    for r in range(a.repeats):
+        res = paired_run(a.seconds, a.rate)
+        row = {k: v for k, v in res.items() if not k.endswith('_joints')}
+        row['repeat'] = r
+        for n in (3, 6):
+            d = res.get(f'{n}_joints')
+            if not d:
+                continue
+            for key in ('step_ms', 'round_trip_ms'):
+                pooled[n][key] += d[key]
+                row[f'{n}_joints_{key[:-3]}'] = _stats(d[key])
+            row[f'{n}_joints_modes_seen'] = d['modes_seen']
+        if row.get('3_joints_step', {}).get('samples') and \
+                row.get('6_joints_step', {}).get('samples'):
+            row['step_ratio_six_over_three'] = {
+                k: row['6_joints_step'][f'{k}_ms'] / row['3_joints_step'][f'{k}_ms']
+                for k in ('median', 'p90', 'p99')}
+        print(json.dumps(row), flush=True)
+        out['runs'].append(row)
+    for key in ('step_ms', 'round_trip_ms'):
+        s3, s6 = _stats(pooled[3][key]), _stats(pooled[6][key])
+        out[f'pooled_{key[:-3]}'] = {'3_joints': s3, '6_joints': s6}
+        if s3['samples'] and s6['samples']:
+            out[f'pooled_{key[:-3]}']['ratio_six_over_three'] = {
+                k: s6[f'{k}_ms'] / s3[f'{k}_ms'] for k in ('median', 'p90', 'p99')}
+    out['load_average_after'] = os.getloadavg()
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f'{a.out}.json').write_text(json.dumps(out, indent=1))
+    print(json.dumps({k: out[k] for k in ('pooled_step', 'pooled_round_trip',
+                                          'load_average_after') if k in out}, indent=1))
+    del np
+    return 0
+
+
 def main_lockstep(a) -> int:
     import numpy as np
     out = {'benchmark': "pdplus's own step_duration per sample, lockstep, 3 vs 6 joints "
@@ -172,9 +350,14 @@ def main(argv=None):
     ap.add_argument('--rt-priority', type=int, default=20, help='SCHED_FIFO priority, 0 = off')
     ap.add_argument('--lockstep', action='store_true',
                     help="pdplus's own step cost in lockstep runs (module docstring)")
+    ap.add_argument('--paired', action='store_true',
+                    help='two pdplus (3 and 6 joints) driven alternately (module docstring)')
+    ap.add_argument('--rate', type=float, default=248.0, help='--paired: pairs per second')
     ap.add_argument('--out', default='six_joint_step_nodes',
-                    help='--lockstep: results/<out>.json')
+                    help='--lockstep, --paired: results/<out>.json')
     a = ap.parse_args(argv)
+    if a.paired:
+        return main_paired(a)
     if a.lockstep:
         return main_lockstep(a)
     from run_benchmarks import _loop_run

@@ -93,10 +93,6 @@ SPEC = NodeSpec(
               'the commands in flight (doc/six_joint.md)'),
         Param('stiction_rest_speed_rad_s', _d.stiction_rest_speed_rad_s, 'rad/s',
               'stiction_prediction: a joint measured slower starts at rest'),
-        Param('dither_amplitude_nm', [], 'N m', 'joints 6: stiction dither +-a per joint '
-              '(PATH, TIME, HOLD only); [] = none', type='double[]'),
-        Param('dither_period_samples', _d.dither_period_samples, 'samples',
-              'dither period (even, >= 2)'),
         Param('theta_max_lead_rad', _d.theta_max_lead_rad, 'rad', 'progress governor lead; '
               '0 = theta from the measurement only (thesis)'),
         Param('reference_mode', 'theta', '', "'theta' (theta-driven) or 'time' (q(t))"),
@@ -224,9 +220,7 @@ class PdPlusNode(Node):
             ki=tuple(P['ki']) or None, integral_limit_nm=tuple(P['integral_limit_nm']) or None,
             stribeck_measured=tuple(bool(x) for x in P['stribeck_measured']) or None,
             stiction_prediction=bool(P['stiction_prediction']),
-            stiction_rest_speed_rad_s=P['stiction_rest_speed_rad_s'],
-            dither_amplitude_nm=tuple(P['dither_amplitude_nm']) or None,
-            dither_period_samples=int(P['dither_period_samples']))
+            stiction_rest_speed_rad_s=P['stiction_rest_speed_rad_s'])
         friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
         self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
         # profiles let go of (a plan replaced, the old motion at enable) are freed on a thread
