@@ -930,9 +930,9 @@ class PdPlusController:
                                  **self._nan_fields())
         # safety on the measurement
         vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
-        if any(abs(wl[i]) > vm[i] for i in R):
+        if any([abs(w) > v for w, v in zip(wl, vm)]):
             self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
-        elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
+        elif any([x < y for x, y in zip(ql, lo)]) or any([x > y for x, y in zip(ql, hi)]):
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
@@ -951,18 +951,18 @@ class PdPlusController:
             sv = [0.0] * n
             sp = [0.0] * n
             for wj, b in zip(self._w_pos, fl):
-                sv = [sv[i] + b[i] for i in R]
-                sp = [sp[i] + wj * b[i] for i in R]
-            p = [ql[i] + d * wl[i] + sp[i] for i in R]
-            uu = [wl[i] + T * sv[i] for i in R]
+                sv = [x + y for x, y in zip(sv, b)]
+                sp = [x + wj * y for x, y in zip(sp, b)]
+            p = [x + d * w + y for x, w, y in zip(ql, wl, sp)]
+            uu = [w + T * y for w, y in zip(wl, sv)]
         else:
             c2 = 0.5 * d * d
-            p = [ql[i] + d * wl[i] + c2 * qdd_ref[i] for i in R]
-            uu = [wl[i] + d * qdd_ref[i] for i in R]
-        e = [q_ref[i] - p[i] for i in R]
-        de = [qd_ref[i] - uu[i] for i in R]
+            p = [x + d * w + c2 * y for x, w, y in zip(ql, wl, qdd_ref)]
+            uu = [w + d * y for w, y in zip(wl, qdd_ref)]
+        e = [x - y for x, y in zip(q_ref, p)]
+        de = [x - y for x, y in zip(qd_ref, uu)]
         em = self.e_max.tolist()
-        if any(abs(e[i]) > em[i] for i in R):
+        if any([abs(x) > y for x, y in zip(e, em)]):
             self.stop(f'tracking error {np.abs(np.array(e)).round(4).tolist()} rad > '
                       f'{self.e_max.tolist()}')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
@@ -980,7 +980,7 @@ class PdPlusController:
         Ma = (M @ qdd_ref_a).tolist()
         Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ qd_ref_a).tolist()
         g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
-        tm = [Ma[i] + Cb[i] + g[i] for i in R]
+        tm = [x + y + z for x, y, z in zip(Ma, Cb, g)]
         pf = self._pred_flight
         if self.friction is not None:
             xs = uu
@@ -993,7 +993,7 @@ class PdPlusController:
         else:
             tf = zero
         kp, kd = self._gains(M.diagonal().tolist())
-        fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
+        fb = [a * x + b * y for a, x, b, y in zip(kp, e, kd, de)]
         ki = self._ki
         if ki is not None:      # integral action: candidate, bounded to +-limit
             i_old = self._integral
@@ -1008,7 +1008,7 @@ class PdPlusController:
             sg = 1.0 if k % P < P // 2 else -1.0
             tf = [tf[i] + sg * dith[i] for i in R]
             self._dither_k = k + 1
-        tau = [tm[i] + tf[i] + fb[i] for i in R]
+        tau = [x + y + z for x, y, z in zip(tm, tf, fb)]
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
@@ -1035,7 +1035,7 @@ class PdPlusController:
         if self._commanded:
             fl.append(tuple(qdd_ref))
         if self._stick_pred:
-            pf.append(([tau[i] - tm[i] for i in R], qdd_ref))
+            pf.append(([x - y for x, y in zip(tau, tm)], qdd_ref))
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
