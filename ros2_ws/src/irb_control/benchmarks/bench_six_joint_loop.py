@@ -135,7 +135,7 @@ def lockstep_run(joints: int, seconds: float, timeout: float = 120.0) -> dict:
 
 
 def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
-               timeout: float = 120.0) -> dict:
+               timeout: float = 120.0, extra_params: tuple = ()) -> dict:
     """``--paired`` (module docstring): pdplus's step_duration [ms] and the round trip [ms]
     per sample of each joint count, over ``seconds`` after ``warmup_s``."""
     import subprocess
@@ -167,8 +167,9 @@ def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
         logs.append(f)
         return subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True)
+    more = [x for p in extra_params for x in ('-p', p)]
     procs = [popen(['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-r',
-                    f'__ns:={ns[n]}', *common, *extra[n]]) for n in (3, 6)]
+                    f'__ns:={ns[n]}', *common, *extra[n], *more]) for n in (3, 6)]
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0')))
     node = rclpy.create_node(f'pair_{uid}', context=ctx)
@@ -207,7 +208,6 @@ def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
                 ex.spin_once(timeout_sec=max(t_end - time.monotonic(), 0.0))
             if any(p.poll() is not None for p in procs):
                 raise RuntimeError('a pdplus ended')
-        start = {n: len(raw[n]) for n in (3, 6)}
         t0 = time.monotonic()
         k = 0
         marks = None
@@ -224,7 +224,6 @@ def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
             while time.monotonic() < t_next:
                 ex.spin_once(timeout_sec=max(t_next - time.monotonic(), 0.0))
         out['pairs_sent'] = k
-        del start
     except RuntimeError as exc:
         out['error'] = str(exc)
         marks = None
@@ -233,10 +232,9 @@ def paired_run(seconds: float, rate_hz: float = 248.0, warmup_s: float = 2.0,
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         stop_sessions(procs)
-        if marks is None:
-            for n, f in zip((3, 6), logs):
-                f.seek(0)
-                out[f'pdplus{n}_log_tail'] = f.read().strip().splitlines()[-5:]
+        for n, f in zip((3, 6), logs):
+            f.seek(0)
+            out[f'pdplus{n}_log_tail'] = f.read().strip().splitlines()[-8:]
         for f in logs:
             f.close()
     out['load_after'] = [round(x, 2) for x in os.getloadavg()]
@@ -264,13 +262,12 @@ def _stats(x) -> dict:
 
 
 def main_paired(a) -> int:
-    import numpy as np
     out = {'benchmark': "pdplus's own step_duration per sample, 3 and 6 joints driven "
                         'alternately sample by sample (--paired)', 'rate_hz': a.rate,
            'load_average_before': os.getloadavg(), 'runs': []}
     pooled = {3: {'step_ms': [], 'round_trip_ms': []}, 6: {'step_ms': [], 'round_trip_ms': []}}
     for r in range(a.repeats):
-        res = paired_run(a.seconds, a.rate)
+        res = paired_run(a.seconds, a.rate, extra_params=tuple(a.pdplus_param))
         row = {k: v for k, v in res.items() if not k.endswith('_joints')}
         row['repeat'] = r
         for n in (3, 6):
@@ -299,7 +296,6 @@ def main_paired(a) -> int:
     (RESULTS / f'{a.out}.json').write_text(json.dumps(out, indent=1))
     print(json.dumps({k: out[k] for k in ('pooled_step', 'pooled_round_trip',
                                           'load_average_after') if k in out}, indent=1))
-    del np
     return 0
 
 
@@ -353,6 +349,8 @@ def main(argv=None):
     ap.add_argument('--paired', action='store_true',
                     help='two pdplus (3 and 6 joints) driven alternately (module docstring)')
     ap.add_argument('--rate', type=float, default=248.0, help='--paired: pairs per second')
+    ap.add_argument('--pdplus-param', action='append', default=[], metavar='NAME:=VALUE',
+                    help='--paired: one more parameter of both pdplus (repeatable)')
     ap.add_argument('--out', default='six_joint_step_nodes',
                     help='--lockstep, --paired: results/<out>.json')
     a = ap.parse_args(argv)
