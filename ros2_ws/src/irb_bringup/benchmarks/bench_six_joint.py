@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Six-joint tracking and control-step cost in the offline closed loop (issue 30).
 
-    python ros2_ws/src/irb_control/benchmarks/bench_six_joint.py [--seeds 1 2 3]
+    python ros2_ws/src/irb_bringup/benchmarks/bench_six_joint.py [--seeds 1 2 3]
         [--repeats 3] [--energy] [--out six_joint]
 
 Tracking: the main job's gluing rectangle with the nozzle normal to its plane
@@ -44,6 +44,8 @@ def parse(argv):
     ap.add_argument('--repeats', type=int, default=3, help='interleaved step-cost runs each')
     ap.add_argument('--energy', action='store_true', help='also the energy-optimal plan')
     ap.add_argument('--out', default='six_joint', help='results/<out>.json')
+    ap.add_argument('--no-prediction', action='store_true',
+                    help='tracking without the stiction prediction (the config otherwise)')
     ap.add_argument('--plain-pd', action='store_true',
                     help="tracking without config/pdplus_six_axis.yaml's wrist stiction "
                          'measures (no integral, Stribeck term on the reference blend)')
@@ -68,11 +70,15 @@ def main(argv=None):
     from irb_control.profiles import default_circle_profile, profile_from_joint_trajectory
 
     out = {'load_average_before': os.getloadavg(), 'speed_m_s': SPEED,
-           'controller': 'plain PD+' if a.plain_pd else 'config/pdplus_six_axis.yaml'}
-    cc = (six_axis_controller_config(ki=None, integral_limit_nm=None, stribeck_measured=None)
-          if a.plain_pd else six_axis_controller_config())
+           'controller': 'plain PD+' if a.plain_pd else 'config/pdplus_six_axis.yaml'
+           + (' without stiction_prediction' if a.no_prediction else '')}
+    cc = (six_axis_controller_config(ki=None, integral_limit_nm=None, stribeck_measured=None,
+                                     stiction_prediction=False)
+          if a.plain_pd else six_axis_controller_config(stiction_prediction=False)
+          if a.no_prediction else six_axis_controller_config())
     out['controller_config'] = {k: getattr(cc, k) for k in (
-        'kp', 'kd', 'ki', 'integral_limit_nm', 'stribeck_measured')}
+        'kp', 'kd', 'ki', 'integral_limit_nm', 'stribeck_measured', 'stiction_prediction',
+        'dither_amplitude_nm', 'dither_period_samples')}
     spec_file = config_path().parent / 'path6_rectangle.yaml'
     path, law = task_from_spec(read_path_spec(str(spec_file)))
     t0 = time.perf_counter()
@@ -95,7 +101,10 @@ def main(argv=None):
         p = Tq[:, :3, 3]
         pos = curve.deviation(p)
         th = np.clip(curve.theta(p), 0.0, 2 * np.pi)
-        ori = rotation_angle(np.asarray(law.rotation(th), float), Tq[:, :3, :3])
+        R = np.asarray(law.rotation(th), float)
+        ori = rotation_angle(R, Tq[:, :3, :3])
+        # the tool axis (nozzle, tool z) alone: the orientation error without the spin about it
+        tilt = np.arccos(np.clip(np.einsum('ij,ij->i', R[:, :, 2], Tq[:, :3, 2]), -1.0, 1.0))
         v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(r.t[sel])
         je = np.nanmax(np.abs(r.joint_error()[sel]), axis=0)
         return {'completed': bool(r.finished()), 'stop_reason': r.stop_reason,
@@ -106,6 +115,8 @@ def main(argv=None):
                 'orientation_error_max_deg': float(np.degrees(ori.max())),
                 'orientation_error_p99_deg': float(np.degrees(np.percentile(ori, 99))),
                 'orientation_error_mean_deg': float(np.degrees(ori.mean())),
+                'tool_axis_tilt_max_deg': float(np.degrees(tilt.max())),
+                'tool_axis_tilt_p99_deg': float(np.degrees(np.percentile(tilt, 99))),
                 'worst_position_at_s': float(r.t[sel][int(np.argmax(pos))]),
                 'worst_orientation_at_s': float(r.t[sel][int(np.argmax(ori))]),
                 'tcp_speed_max_m_s': float(v.max()), 'tcp_speed_mean_m_s': float(v.mean()),
@@ -128,7 +139,8 @@ def main(argv=None):
                 out['tracking'].append(row)
                 print(json.dumps({k: row[k] for k in (
                     'plan', 'friction_ff', 'seed', 'path_error_max_mm',
-                    'orientation_error_max_deg', 'stop_reason')}), flush=True)
+                    'orientation_error_max_deg', 'tool_axis_tilt_max_deg', 'stop_reason')}),
+                    flush=True)
 
     # --- step cost, six vs three joints, interleaved ---------------------------------------
     three = RobotModel.load()

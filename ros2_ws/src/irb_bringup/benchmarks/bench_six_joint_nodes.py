@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Six-axis plan end to end on the nodes: plan6 -> pdplus (joints 6) -> simulator (joints 6).
 
-    python ros2_ws/src/irb_control/benchmarks/bench_six_joint_nodes.py
+    python ros2_ws/src/irb_bringup/benchmarks/bench_six_joint_nodes.py
         [--path-file F] [--duration 8] [--grid 0] [--out six_joint_nodes]
+    python ros2_ws/src/irb_bringup/benchmarks/bench_six_joint_nodes.py --plan trapezoid \
+        [--speed 0.25] [--friction file] [--out six_joint_nodes_trapezoid_file]
 
 The command sequence of doc/six_joint.md, as processes (``ros2 run``, a private namespace,
 the simulator in lockstep on /clock so that the machine's load cannot cost samples):
@@ -10,12 +12,21 @@ the simulator with ``joints:=6`` at ``--start`` pose, pdplus with config/pdplus.
 config/pdplus_six_axis.yaml (``builtin_profile:=none``), then ``plan6 --publish`` (the
 six-axis energy plan of ``--path-file`` in ``--duration`` s, latched on /planned_trajectory;
 it waits for pdplus's verdict), then ``~/enable``; the run ends when pdplus holds the end pose.
+``--plan trapezoid``: instead of plan6, the issue's tracking goal's plan (as
+bench_six_joint.py builds it): the trapezoid along arc length at ``--speed`` (10 % ramps,
+T = L / (0.9 v)) made into six-joint points by ``SixAxisPlanner.trajectory``, published here
+latched on /planned_trajectory as ``plan6 --publish`` does (``plan6_cli.trajectory_message``),
+pdplus's verdict awaited on its plan_status. ``--friction``: pdplus's friction feed-forward,
+'nominal' (the model's map) or 'file' (config/plant.yaml: the simulated plant's own friction,
+what a perfect identification gives).
 
 Measured on the simulator's /joint_states (joints by name) while pdplus is in PATH mode
 (its /controller_state, by the sim-time stamps), with the independent check's kinematics
 (irb_planning ``verify.DHTable``: the DH table, not pinocchio; ``verify.PathCurve``; the
 orientation law at the projected theta, ``six_axis_check.rotation_angle``): path error
-[mm] and orientation error [deg], max / p99 / mean. Writes results/<out>.json.
+[mm] and orientation error [deg], max / p99 / mean, and the tool axis's (nozzle's) tilt
+[deg] alone (the angle between the law's and the played tool z: the orientation error
+without the spin about the nozzle, which is joint 6's). Writes results/<out>.json.
 """
 from __future__ import annotations
 
@@ -43,6 +54,11 @@ def parse(argv):
     ap.add_argument('--timeout', type=float, default=300.0, help='[s] bound of the whole run')
     ap.add_argument('--plain-pd', action='store_true', help="without pdplus_six_axis.yaml's "
                     'integral and measured-speed Stribeck term')
+    ap.add_argument('--plan', choices=('energy', 'trapezoid'), default='energy',
+                    help="plan6's energy plan in --duration, or the trapezoid at --speed")
+    ap.add_argument('--speed', type=float, default=0.25, help='[m/s] --plan trapezoid')
+    ap.add_argument('--friction', choices=('nominal', 'file'), default='nominal',
+                    help="pdplus friction_mode ('file': config/plant.yaml, the plant's own)")
     ap.add_argument('--out', default='six_joint_nodes', help="results/<out>.json ('' = none)")
     return ap.parse_args(argv)
 
@@ -72,7 +88,10 @@ def measure(js_t, js_q, cs_t, cs_mode, path_file: str, tcp_xyz) -> dict:
     p = Tq[:, :3, 3]
     pos = curve.deviation(p)
     th = np.clip(curve.theta(p), 0.0, 2 * np.pi)
-    ori = np.degrees(rotation_angle(np.asarray(law.rotation(th), float), Tq[:, :3, :3]))
+    R = np.asarray(law.rotation(th), float)
+    ori = np.degrees(rotation_angle(R, Tq[:, :3, :3]))
+    tilt = np.degrees(np.arccos(np.clip(np.einsum('ij,ij->i', R[:, :, 2], Tq[:, :3, 2]),
+                                        -1.0, 1.0)))
     v = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.maximum(np.diff(js_t[sel]), 1e-9)
     return {'samples': int(sel.sum()), 'path_s': float(js_t[sel][-1] - js_t[sel][0]),
             'path_error_max_mm': float(pos.max() * 1e3),
@@ -81,13 +100,57 @@ def measure(js_t, js_q, cs_t, cs_mode, path_file: str, tcp_xyz) -> dict:
             'orientation_error_max_deg': float(ori.max()),
             'orientation_error_p99_deg': float(np.percentile(ori, 99)),
             'orientation_error_mean_deg': float(ori.mean()),
+            'tool_axis_tilt_max_deg': float(tilt.max()),
+            'tool_axis_tilt_p99_deg': float(np.percentile(tilt, 99)),
+            'tool_axis_tilt_mean_deg': float(tilt.mean()),
             'worst_position_at_s': float(js_t[sel][int(np.argmax(pos))]),
             'worst_orientation_at_s': float(js_t[sel][int(np.argmax(ori))]),
             'tcp_speed_mean_m_s': float(np.median(v))}
 
 
+def trapezoid_points(path_file: str, tcp_xyz, speed: float) -> dict:
+    """bench_six_joint.py's plan: the trapezoid along arc length at ``speed`` [m/s] (10 %
+    ramps, T = L / (0.9 v)) as six-joint points (t, q, qd, qdd) by the six-axis planner."""
+    import numpy as np
+    from irb_description.six_axis import pose
+    from irb_planning.baselines import trapezoid_profile
+    from irb_planning.six_axis_plan import SixAxisPlanner, read_task_file
+    path, law = read_task_file(path_file)
+    planner = SixAxisPlanner(tcp=pose(np.eye(3), np.asarray(tcp_xyz, float)))
+    prob = planner.problem(path, law)
+    tr = planner.trajectory(prob, trapezoid_profile(path.length / (0.9 * speed), 0.1))[0]
+    return {k: np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd')}
+
+
+def _publish_plan(node, ex, points: dict, path_file: str, timeout: float) -> str:
+    """Publish ``points`` latched on planned_trajectory (as plan6 --publish) and wait for
+    pdplus's verdict on its plan_status: '' accepted, else why not."""
+    from irb_description.node_main import latched_qos
+    from irb_description.path import read_path_spec
+    from irb_interfaces.msg import PlanStatus
+    from irb_planning.plan6_cli import trajectory_message
+    from trajectory_msgs.msg import JointTrajectory
+    pub = node.create_publisher(JointTrajectory, 'planned_trajectory', latched_qos())
+    msg = trajectory_message(points, [f'joint_{i}' for i in range(1, 7)],
+                             read_path_spec(path_file), node.get_clock().now().to_msg())
+    key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+    verdict = []
+    node.create_subscription(PlanStatus, 'pdplus/plan_status',
+                             lambda m: verdict.append(m) if (m.plan_stamp.sec,
+                                                             m.plan_stamp.nanosec) == key
+                             else None, latched_qos())
+    pub.publish(msg)
+    deadline = time.monotonic() + timeout
+    while not verdict and time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.1)
+    if not verdict:
+        return f'no verdict on the plan within {timeout:g} s'
+    return '' if verdict[0].accepted else f'refused: {verdict[0].reason}'
+
+
 def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
-        start=START, timeout: float = 300.0, log=print, plain_pd: bool = False) -> dict:
+        start=START, timeout: float = 300.0, log=print, plain_pd: bool = False,
+        plan: str = 'energy', speed: float = 0.25, friction: str = 'nominal') -> dict:
     """The sequence on the nodes (module docstring); the figures and how the run went."""
     import subprocess
     import tempfile
@@ -108,8 +171,15 @@ def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
     tcp = '[' + ','.join(repr(float(x)) for x in tcp_xyz) + ']'
     t_wall = time.monotonic()
     deadline = t_wall + timeout
-    out = {'namespace': ns, 'path_file': path_file, 'duration_s': duration,
+    out = {'namespace': ns, 'path_file': path_file, 'plan': plan, 'friction_ff': friction,
            'tcp_xyz': list(tcp_xyz), 'start_rad': list(start), 'load_before': os.getloadavg()}
+    if plan == 'energy':
+        out['duration_s'] = duration
+    else:
+        t0 = time.monotonic()
+        points = trapezoid_points(path_file, tcp_xyz, speed)
+        out.update({'speed_m_s': speed, 'duration_s': float(points['t'][-1]),
+                    'points': int(len(points['t'])), 'trajectory_s': time.monotonic() - t0})
 
     logs = []
     # pdplus.yaml + pdplus_six_axis.yaml for a namespaced node: the files' key is the node's
@@ -119,8 +189,12 @@ def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
     for name in ('pdplus.yaml', 'pdplus_six_axis.yaml'):
         merged.update(yaml.safe_load(config_path(name).read_text())['pdplus']['ros__parameters'])
     if plain_pd:
-        for k in ('ki', 'integral_limit_nm', 'stribeck_measured'):
+        for k in ('ki', 'integral_limit_nm', 'stribeck_measured', 'stiction_prediction',
+                  'stiction_rest_speed_rad_s'):
             merged.pop(k, None)
+    if friction == 'file':
+        merged['friction_mode'] = 'file'
+        merged['friction_map_file'] = str(config_path('plant.yaml'))
     out['pdplus_parameters'] = merged
     params = tempfile.NamedTemporaryFile('w', suffix='.yaml', delete=False)
     yaml.safe_dump({'/**': {'ros__parameters': merged}}, params)
@@ -164,19 +238,25 @@ def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
         while not enable.wait_for_service(timeout_sec=1.0):
             if any(p.poll() is not None for p in procs) or time.monotonic() > deadline:
                 raise RuntimeError('pdplus/enable not available (a node ended or timeout)')
+        if plan == 'trapezoid':
+            why = _publish_plan(node, ex, points, path_file, 60.0)
+            out['plan_verdict'] = why or 'accepted'
+            if why:
+                raise RuntimeError(f'the trapezoid plan: {why}')
         cmd = ['ros2', 'run', 'irb_planning', 'plan6', '--path-file', path_file,
                '--duration', f'{duration:g}', '--tcp', *(f'{x:g}' for x in tcp_xyz),
                '--publish', '--verdict-timeout', '60', *(['--grid', str(grid)] if grid else []),
                *ros]
-        t0 = time.monotonic()
-        res = subprocess.run(cmd, capture_output=True, text=True,
-                             timeout=max(deadline - time.monotonic(), 1.0))
-        out['plan6_s'] = time.monotonic() - t0
-        out['plan6_exit'] = res.returncode
-        out['plan6_output'] = (res.stdout + res.stderr).strip().splitlines()[-4:]
-        log('\n'.join(out['plan6_output']))
-        if res.returncode != 0:
-            raise RuntimeError(f'plan6 exit {res.returncode}: {out["plan6_output"]}')
+        if plan == 'energy':
+            t0 = time.monotonic()
+            res = subprocess.run(cmd, capture_output=True, text=True,
+                                 timeout=max(deadline - time.monotonic(), 1.0))
+            out['plan6_s'] = time.monotonic() - t0
+            out['plan6_exit'] = res.returncode
+            out['plan6_output'] = (res.stdout + res.stderr).strip().splitlines()[-4:]
+            log('\n'.join(out['plan6_output']))
+            if res.returncode != 0:
+                raise RuntimeError(f'plan6 exit {res.returncode}: {out["plan6_output"]}')
         # enable (asked again while only the simulator's latched axis status is missing)
         while True:
             fut = enable.call_async(Trigger.Request())
@@ -224,7 +304,11 @@ def main(argv=None):
     if not a.path_file:
         from irb_planning.six_axis_plan import config_path
         a.path_file = str(config_path().parent / 'path6_rectangle.yaml')
-    out = run(a.path_file, a.duration, a.grid, a.tcp, a.start, a.timeout, plain_pd=a.plain_pd)
+    if not (0.0 < a.speed < 2.0):
+        print('bench_six_joint_nodes: --speed must be in (0, 2) m/s', file=sys.stderr)
+        return 2
+    out = run(a.path_file, a.duration, a.grid, a.tcp, a.start, a.timeout, plain_pd=a.plain_pd,
+              plan=a.plan, speed=a.speed, friction=a.friction)
     print(json.dumps(out, indent=1))
     if a.out:
         RESULTS.mkdir(exist_ok=True)

@@ -217,7 +217,8 @@ def build_default(friction_mode: str = 'nominal', friction_file: str | Path | No
 def six_axis_controller_config(path: str | Path | None = None, **overrides) -> ControllerConfig:
     """ControllerConfig of six joints: the per-joint settings of config/pdplus_six_axis.yaml
     (``pdplus.ros__parameters``: kp, kd, torque_rate_limit_nm_s, max_tracking_error_rad, ki,
-    integral_limit_nm, stribeck_measured), the
+    integral_limit_nm, stribeck_measured, stiction_prediction, stiction_rest_speed_rad_s,
+    dither_amplitude_nm, dither_period_samples), the
     rest ControllerConfig's defaults (= config/pdplus.yaml), then ``overrides``."""
     import yaml
 
@@ -233,6 +234,13 @@ def six_axis_controller_config(path: str | Path | None = None, **overrides) -> C
             vals[k] = tuple(float(x) for x in block[k])
     if block.get('stribeck_measured'):
         vals['stribeck_measured'] = tuple(bool(x) for x in block['stribeck_measured'])
+    if 'stiction_prediction' in block:
+        vals['stiction_prediction'] = bool(block['stiction_prediction'])
+    if 'stiction_rest_speed_rad_s' in block:
+        vals['stiction_rest_speed_rad_s'] = float(block['stiction_rest_speed_rad_s'])
+    if block.get('dither_amplitude_nm'):
+        vals['dither_amplitude_nm'] = tuple(float(x) for x in block['dither_amplitude_nm'])
+        vals['dither_period_samples'] = int(block.get('dither_period_samples', 2))
     return ControllerConfig(**{**vals, **overrides})
 
 

@@ -70,6 +70,8 @@ MODE_HOLD = 5
 MODE_NAMES = {MODE_IDLE: 'idle', MODE_RAMP: 'ramp', MODE_PATH: 'path', MODE_TIME: 'time',
               MODE_STOPPED: 'stopped', MODE_HOLD: 'hold'}
 MOVING = (MODE_RAMP, MODE_PATH, MODE_TIME)
+DITHER_MODES = (MODE_PATH, MODE_TIME, MODE_HOLD)     # where the stiction dither acts
+_SLIDE_SUBSTEPS = 4          # substeps per period of the stiction prediction's joint model
 
 # events of the state machine
 EV_ENABLE = 'enable'          # operator (or the documented auto-enable at start-up)
@@ -248,6 +250,21 @@ class ControllerConfig:
     #: sticks, Coulomb as soon as it slides, as the friction itself (for creeping joints);
     #: None = False on every joint
     stribeck_measured: tuple | None = None
+    #: stiction dither (n joints, ``_step_n`` only; None = none): a square wave of +-a_i
+    #: [N m] per joint, period ``dither_period_samples`` (even, >= 2) controller samples,
+    #: added to the command only while a command is published in PATH, TIME or HOLD (never
+    #: in the ramp, IDLE or STOPPED; its phase restarts on enable, stop, motors off/on); it
+    #: goes through the rate and torque limits like the rest of the command. The classical
+    #: remedy for stick-slip: the joint's friction is averaged over the dither's swing.
+    #: with ``stribeck_measured``: the measured speed the hump takes is carried over the
+    #: delay by a one-joint stick-slip model of the commands still in flight (their torque
+    #: beyond the model terms, the reference accelerations, M_ii, the controller's friction
+    #: map; a joint measured below ``stiction_rest_speed_rad_s`` starts at rest): the hump
+    #: switches off when the joint is predicted to have broken away, not 3 samples later
+    stiction_prediction: bool = False
+    stiction_rest_speed_rad_s: float = 0.003      # [rad/s]
+    dither_amplitude_nm: tuple | None = None      # [N m]
+    dither_period_samples: int = 2                # [samples]
 
     @property
     def joints(self) -> int:
@@ -281,6 +298,23 @@ class ControllerConfig:
                 or any(not isinstance(x, (bool, np.bool_)) for x in self.stribeck_measured)):
             raise ValueError(f'stribeck_measured must be {n} booleans, got '
                              f'{self.stribeck_measured}')
+        if self.dither_amplitude_nm is not None:
+            v = np.asarray(self.dither_amplitude_nm, float)
+            if v.shape != (n,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f'dither_amplitude_nm must be {n} finite numbers >= 0, got '
+                                 f'{v}')
+        if (not isinstance(self.dither_period_samples, (int, np.integer))
+                or self.dither_period_samples < 2 or self.dither_period_samples % 2):
+            raise ValueError(f'dither_period_samples must be an even integer >= 2, got '
+                             f'{self.dither_period_samples!r}')
+        if not (math.isfinite(self.stiction_rest_speed_rad_s)
+                and self.stiction_rest_speed_rad_s >= 0):
+            raise ValueError(f'stiction_rest_speed_rad_s must be >= 0, got '
+                             f'{self.stiction_rest_speed_rad_s}')
+        if self.stiction_prediction and not (self.stribeck_measured is not None
+                                             and any(self.stribeck_measured)):
+            raise ValueError('stiction_prediction needs stribeck_measured joints (it predicts '
+                             'the speed their Stribeck term takes)')
         if (self.ki is None) != (self.integral_limit_nm is None):
             raise ValueError('ki and integral_limit_nm go together (the integral is bounded)')
         if self.delay_prediction not in DELAY_PREDICTIONS:
@@ -411,6 +445,11 @@ class PdPlusController:
         self._i_lim = None if c.ki is None else np.asarray(c.integral_limit_nm,
                                                            float).tolist()
         self._integral = [0.0] * n
+        # stiction dither (ControllerConfig.dither_amplitude_nm): amplitudes, sample counter
+        self._dither = (None if c.dither_amplitude_nm is None
+                        or not any(c.dither_amplitude_nm)
+                        else [float(x) for x in c.dither_amplitude_nm])
+        self._dither_k = 0
         self._hump_measured = (None if c.stribeck_measured is None
                                or not any(c.stribeck_measured)
                                else [bool(x) for x in c.stribeck_measured])
@@ -451,6 +490,12 @@ class PdPlusController:
         self._pending_tracker = None
         self._use_path(path)
         self._friction_par = _parametric_friction(friction)
+        self._stick_pred = bool(c.stiction_prediction and self._hump_measured is not None
+                                and self._friction_par is not None)
+        self._pred_flight: deque = deque(maxlen=max(c.prediction_samples, 1))
+        self._hump_joints = [i for i in range(self.n) if self._hump_measured
+                             and self._hump_measured[i]]
+        self._slide_h = c.period_s / _SLIDE_SUBSTEPS
         if self._hump_measured is not None and friction is not None \
                 and self._friction_par is None:
             raise ValueError('stribeck_measured needs a parametric friction map (no '
@@ -531,7 +576,9 @@ class PdPlusController:
         self._enable_requested = True
         self._halt_T = self._halt = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
         self.stop_reason = ''
         self.mode = MODE_IDLE         # the ramp starts on the next valid sample
         return True, f'enabled: {why}'
@@ -547,7 +594,9 @@ class PdPlusController:
         self._halt_T = self._halt = None
         self._prev_tau = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
 
     def hold(self) -> tuple[bool, str]:
         """Controlled stop (the ``hold`` event): a moving reference (ramp, path, time)
@@ -593,7 +642,9 @@ class PdPlusController:
             self._halt_T = self._halt = None
             self._prev_tau = None
             self._in_flight.clear()
+            self._pred_flight.clear()
             self._integral = [0.0] * self.n
+            self._dither_k = 0
         return True, why
 
     def motors_on(self, q: np.ndarray) -> tuple[bool, str]:
@@ -606,7 +657,9 @@ class PdPlusController:
         self._hold = np.asarray(q, float).tolist()
         self._prev_tau = None
         self._in_flight.clear()
+        self._pred_flight.clear()
         self._integral = [0.0] * self.n
+        self._dither_k = 0
         return True, why
 
     @property
@@ -632,7 +685,8 @@ class PdPlusController:
         every operation is the element-wise one of the equations in the module docstring, in
         the same order, so the result is the same to the bit as the array formulation.
         """
-        if self.n != 3 or self._ki is not None or self._hump_measured:
+        if (self.n != 3 or self._ki is not None or self._hump_measured
+                or self._dither is not None):
             return self._step_n(t, q, qd)
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
@@ -876,9 +930,9 @@ class PdPlusController:
                                  **self._nan_fields())
         # safety on the measurement
         vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
-        if any(abs(wl[i]) > vm[i] for i in R):
+        if any([abs(w) > v for w, v in zip(wl, vm)]):
             self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
-        elif any(ql[i] < lo[i] for i in R) or any(ql[i] > hi[i] for i in R):
+        elif any([x < y for x, y in zip(ql, lo)]) or any([x > y for x, y in zip(ql, hi)]):
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
@@ -897,18 +951,18 @@ class PdPlusController:
             sv = [0.0] * n
             sp = [0.0] * n
             for wj, b in zip(self._w_pos, fl):
-                sv = [sv[i] + b[i] for i in R]
-                sp = [sp[i] + wj * b[i] for i in R]
-            p = [ql[i] + d * wl[i] + sp[i] for i in R]
-            uu = [wl[i] + T * sv[i] for i in R]
+                sv = [x + y for x, y in zip(sv, b)]
+                sp = [x + wj * y for x, y in zip(sp, b)]
+            p = [x + d * w + y for x, w, y in zip(ql, wl, sp)]
+            uu = [w + T * y for w, y in zip(wl, sv)]
         else:
             c2 = 0.5 * d * d
-            p = [ql[i] + d * wl[i] + c2 * qdd_ref[i] for i in R]
-            uu = [wl[i] + d * qdd_ref[i] for i in R]
-        e = [q_ref[i] - p[i] for i in R]
-        de = [qd_ref[i] - uu[i] for i in R]
+            p = [x + d * w + c2 * y for x, w, y in zip(ql, wl, qdd_ref)]
+            uu = [w + d * y for w, y in zip(wl, qdd_ref)]
+        e = [x - y for x, y in zip(q_ref, p)]
+        de = [x - y for x, y in zip(qd_ref, uu)]
         em = self.e_max.tolist()
-        if any(abs(e[i]) > em[i] for i in R):
+        if any([abs(x) > y for x, y in zip(e, em)]):
             self.stop(f'tracking error {np.abs(np.array(e)).round(4).tolist()} rad > '
                       f'{self.e_max.tolist()}')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
@@ -926,13 +980,20 @@ class PdPlusController:
         Ma = (M @ qdd_ref_a).tolist()
         Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ qd_ref_a).tolist()
         g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
-        tm = [Ma[i] + Cb[i] + g[i] for i in R]
+        tm = [x + y + z for x, y, z in zip(Ma, Cb, g)]
+        pf = self._pred_flight
         if self.friction is not None:
-            tf = self._friction_torque_n(qd_ref, uu)
+            xs = uu
+            if self._stick_pred and len(pf) == self.config.prediction_samples:
+                xs = list(uu)
+                mdg = M.diagonal().tolist()
+                for i in self._hump_joints:
+                    xs[i] = self._predict_speed(i, wl[i], mdg[i], pf)
+            tf = self._friction_torque_n(qd_ref, uu, xs)
         else:
             tf = zero
         kp, kd = self._gains(M.diagonal().tolist())
-        fb = [kp[i] * e[i] + kd[i] * de[i] for i in R]
+        fb = [a * x + b * y for a, x, b, y in zip(kp, e, kd, de)]
         ki = self._ki
         if ki is not None:      # integral action: candidate, bounded to +-limit
             i_old = self._integral
@@ -940,7 +1001,14 @@ class PdPlusController:
             lim = self._i_lim
             i_new = [min(max(i_old[i] + ki[i] * e[i] * T, -lim[i]), lim[i]) for i in R]
             fb = [fb[i] + i_new[i] for i in R]
-        tau = [tm[i] + tf[i] + fb[i] for i in R]
+        dith = self._dither
+        if dith is not None and self.mode in DITHER_MODES:     # stiction dither: +-a_i
+            k = self._dither_k
+            P = self.config.dither_period_samples
+            sg = 1.0 if k % P < P // 2 else -1.0
+            tf = [tf[i] + sg * dith[i] for i in R]
+            self._dither_k = k + 1
+        tau = [x + y + z for x, y, z in zip(tm, tf, fb)]
         if not all(map(isfinite, tau)):
             self.stop('non-finite torque computed')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
@@ -966,9 +1034,48 @@ class PdPlusController:
         self._last_qd_ref = qd_ref
         if self._commanded:
             fl.append(tuple(qdd_ref))
+        if self._stick_pred:
+            pf.append(([x - y for x, y in zip(tau, tm)], qdd_ref))
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
                              np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
                              np.array(tm), np.array(tf), np.array(fb))
+
+    def _slide(self, i: int, v: float, u: float, a: float, m: float) -> float:
+        """Joint i's speed v [rad/s] one period later under one command in flight: u [N m]
+        its torque beyond the model terms, a [rad/s^2] the reference acceleration it was
+        computed for, m [kg m^2] M_ii (``_predict_speed`` of one command)."""
+        return self._predict_speed(i, v, m, ((u, a),), False)
+
+    def _predict_speed(self, i: int, v: float, m: float, flight, lists: bool = True
+                       ) -> float:
+        """Joint i's speed v [rad/s] carried over the commands in ``flight`` (oldest first;
+        each (u, a) as in ``_slide``, per-joint lists of which joint i's are taken, or with
+        ``lists`` False joint i's floats), M_ii = m [kg m^2]: one period
+        each in ``_SLIDE_SUBSTEPS`` semi-implicit stick-slip substeps of the controller's
+        parametric friction (``stiction_prediction``); a speed below
+        ``stiction_rest_speed_rad_s`` at a command's start is rest."""
+        fcp, fcn, hp, hn, vs, fv, off = self._friction_par[i]
+        s_pos, s_neg = fcp + hp, -(fcn + hn)           # the breakaway levels
+        h = self._slide_h
+        rest = self.config.stiction_rest_speed_rad_s
+        exp = math.exp
+        for u, a in flight:
+            if lists:
+                u, a = u[i], a[i]
+            if abs(v) < rest:
+                v = 0.0
+            for _ in range(_SLIDE_SUBSTEPS):
+                if v == 0.0:
+                    drive = m * a + u - off     # what friction must hold for the joint to rest
+                    if s_neg <= drive <= s_pos:
+                        break                   # at rest for the rest of this command
+                    v = h * (drive - (s_pos if drive > 0.0 else s_neg)) / m
+                    continue
+                fr = (fcp + hp * exp(-(v / vs) ** 2) if v > 0.0
+                      else -(fcn + hn * exp(-(v / vs) ** 2))) + fv * v + off
+                vn = v + h * (a + (u - fr) / m)
+                v = 0.0 if vn * v < 0.0 else vn
+        return v
 
     def _rejected(self) -> ControlOutput:
         self.rejected_inputs += 1
@@ -976,6 +1083,8 @@ class PdPlusController:
         # flight once more (as the plant's delay line repeats it)
         if self._commanded and self._in_flight:
             self._in_flight.append(self._in_flight[-1])
+        if self._stick_pred and self._pred_flight:
+            self._pred_flight.append(self._pred_flight[-1])
         n = self.n
         return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
                              rejected_input=True, **self._nan_fields())
@@ -995,14 +1104,17 @@ class PdPlusController:
         theta = (direction * (ang - start)) % self._two_pi
         return 0.0 if theta >= self._two_pi else theta
 
-    def _friction_torque_n(self, qd_ref: list, qd_p) -> list:
-        """``_friction_torque`` on n joints (the same operations per joint)."""
+    def _friction_torque_n(self, qd_ref: list, qd_p, qd_hump=None) -> list:
+        """``_friction_torque`` on n joints (the same operations per joint); ``qd_hump``: the
+        speeds the ``stribeck_measured`` joints' hump takes (default qd_p)."""
         n = self.n
         a = self.config.friction_blend_a
         alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
         v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
         par = self._friction_par
         measured = self._hump_measured or [False] * n
+        if qd_hump is None:
+            qd_hump = qd_p
         if par is None:     # (stribeck_measured is refused with such maps at construction)
             return self.friction.torque(np.array(v)).tolist()
         out = []
@@ -1010,7 +1122,7 @@ class PdPlusController:
         for i in range(n):
             fcp, fcn, hp, hn, vs, fv, off = par[i]
             x = v[i]
-            xs = qd_p[i] if measured[i] else x
+            xs = qd_hump[i] if measured[i] else x
             e = float(exp(-((xs / vs) ** 2)))
             sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
             tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x

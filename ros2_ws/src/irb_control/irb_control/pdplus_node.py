@@ -88,6 +88,11 @@ SPEC = NodeSpec(
               type='double[]'),
         Param('stribeck_measured', [], '', 'joints 6: per joint, the feed-forward\'s Stribeck '
               'term on the measured speed; [] = all on the reference blend', type='bool[]'),
+        Param('stiction_prediction', _d.stiction_prediction, '', 'joints 6: the '
+              'stribeck_measured joints\' speed carried over the delay by a stick-slip model of '
+              'the commands in flight (doc/six_joint.md)'),
+        Param('stiction_rest_speed_rad_s', _d.stiction_rest_speed_rad_s, 'rad/s',
+              'stiction_prediction: a joint measured slower starts at rest'),
         Param('theta_max_lead_rad', _d.theta_max_lead_rad, 'rad', 'progress governor lead; '
               '0 = theta from the measurement only (thesis)'),
         Param('reference_mode', 'theta', '', "'theta' (theta-driven) or 'time' (q(t))"),
@@ -213,7 +218,9 @@ class PdPlusNode(Node):
             max_tracking_error_rad=tuple(P['max_tracking_error_rad']),
             theta_max_lead_rad=P['theta_max_lead_rad'],
             ki=tuple(P['ki']) or None, integral_limit_nm=tuple(P['integral_limit_nm']) or None,
-            stribeck_measured=tuple(bool(x) for x in P['stribeck_measured']) or None)
+            stribeck_measured=tuple(bool(x) for x in P['stribeck_measured']) or None,
+            stiction_prediction=bool(P['stiction_prediction']),
+            stiction_rest_speed_rad_s=P['stiction_rest_speed_rad_s'])
         friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
         self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
         # profiles let go of (a plan replaced, the old motion at enable) are freed on a thread

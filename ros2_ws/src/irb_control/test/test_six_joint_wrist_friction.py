@@ -76,7 +76,8 @@ def test_stribeck_on_the_measured_speed(six):
     path = LinePath(np.array([0.6, 0.0, 0.3]), np.array([0.7, 0.0, 0.3]))
     on = PdPlusController(six, path, six_axis_controller_config(), fm)
     off = PdPlusController(six, path, six_axis_controller_config(
-        ki=None, integral_limit_nm=None, stribeck_measured=None), fm)
+        ki=None, integral_limit_nm=None, stribeck_measured=None, stiction_prediction=False),
+        fm)
     ref = [0.0, 0.0, 0.0, 0.005, 0.005, 0.005]                 # a creeping reference
     j6 = fm.joints[5]
     stuck = on._friction_torque_n(ref, [0.0] * 6)
