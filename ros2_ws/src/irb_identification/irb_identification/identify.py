@@ -29,11 +29,12 @@ from pathlib import Path
 
 import yaml
 
-from irb_description.friction import FrictionMap, FrictionMapError, load_friction_map
+from irb_description.friction import FrictionMapError
 from irb_description.node_help import own_args
 
 from .bagio import BagError
-from .friction_fit import FitConfig, IdentificationError, friction_map
+from .friction_fit import (FitConfig, IdentificationError, complete_map, complete_source,
+                           friction_map)
 from .gaps import ON_GAP, GapConfig, GapError
 from .pipeline import (METHODS, PipelineConfig, check_gaps, identify_joints, report_entry,
                        summary_line)
@@ -98,29 +99,6 @@ def _parser() -> argparse.ArgumentParser:
                    'longer ones end holds and derivatives')
     p.add_argument('--json', default=None, help='also write a JSON report here (always)')
     return p
-
-
-def complete_source(spec: str, model):
-    """The map ``--complete-from`` names (None for ''), for the model's joints; 'nominal' =
-    the model's nominal map. FrictionMapError (one line) when it lacks a joint or is bad."""
-    if not spec:
-        return None
-    if spec == 'nominal':
-        return model.friction
-    return load_friction_map(spec, model.joint_names)
-
-
-def complete_map(fmap: FrictionMap, base: FrictionMap, order) -> FrictionMap:
-    """``fmap`` plus the joints of ``order`` it lacks, taken from ``base``, in ``order``
-    (joints of ``fmap`` outside ``order`` follow); the source says which were copied."""
-    names = [n for n in order if n in fmap.joint_names or n in base.joint_names]
-    names += [n for n in fmap.joint_names if n not in names]
-    copied = [n for n in names if n not in fmap.joint_names]
-    joints = tuple(fmap.joints[fmap.joint_names.index(n)] if n in fmap.joint_names
-                   else base.joints[base.joint_names.index(n)] for n in names)
-    source = fmap.source + (f' (not identified here, from {base.source}: '
-                            f'{", ".join(copied)})' if copied else '')
-    return FrictionMap(tuple(names), joints, source)
 
 
 def bag_torque_kind(bag: str) -> str | None:

@@ -172,6 +172,7 @@ def run_six_joint_experiments(joints: list[str], speeds: list[float], out_dir: P
     friction = friction or plant_friction_map(joint_names=model.joint_names)
     c6 = six_joint_center(center)
     bags = []
+    start_ns = 1_700_000_000 * 10**9        # the runs follow each other, 1 s apart
     for name in joints:
         if name not in model.joint_names:
             raise ValueError(f'unknown joint {name!r}, expected one of {model.joint_names}')
@@ -182,7 +183,9 @@ def run_six_joint_experiments(joints: list[str], speeds: list[float], out_dir: P
             run = simulate_six(model, friction, prof, j, q0, config)
             bag = f'{prefix}_{name}_{float(c):.4f}'.replace('.', 'p')
             bags.append(write_run_bag(run, Path(out_dir) / bag, model.joint_names,
+                                      start_ns=start_ns,
                                       custom_data={'plant_friction': friction.source,
                                                    'simulator': 'irb_control Plant, 6 joints'}))
+            start_ns += int(round((run.t[-1] + 1.0) * 1e9))
             log(f'{bag}: {prof.duration:.1f} s, {len(run.t)} samples (six-joint plant)')
     return bags

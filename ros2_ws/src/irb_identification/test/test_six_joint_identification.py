@@ -137,3 +137,32 @@ def test_held_out_motion_torque_predicted(wrist_map, model):
     assert np.all(moving[:, 3:].sum(axis=0) > 500)
     assert np.all(ident <= 1.1 * own + 0.005), (ident, own)
     assert np.all(ident * 3 <= nominal), (ident, nominal)
+
+
+def test_identifier_core_on_the_sweeps_as_one_stream(wrist_map, model, tmp_path):
+    """The identifier node's core (stream.py) with joints joint_4..6: the sweeps arrive as
+    one live stream of six-joint JointStates; it keeps the wrist joints that stood still in
+    each other's runs, subtracts the six-joint model and writes a six-joint map (complete_from
+    nominal) with the wrist within 3 % of the plant, as the offline identify."""
+    from irb_identification.bagio import iter_messages
+    from irb_identification.pipeline import PipelineConfig
+    from irb_identification.segments import SegmentConfig
+    from irb_identification.friction_fit import FitConfig
+    from irb_identification.stream import StreamConfig, StreamIdentifier
+    _, out = wrist_map
+    cfg = StreamConfig(joints=list(WRIST_JOINTS), out_map=str(tmp_path / 'live.yaml'),
+                       complete_from='nominal', pipeline=PipelineConfig(
+                           fit=FitConfig(segments=SegmentConfig(effort_lag_s=EFFORT_LAG_S))))
+    core = StreamIdentifier(cfg, model)
+    for bag in sorted((out / 'bags').iterdir()):
+        for topic, _, t, data in iter_messages(bag):
+            if topic == '/joint_states':
+                core.add(data, t, 0.0)
+    res = core.compute('quiet')
+    assert res.ok, res.error
+    fmap = load_friction_map(res.map_path, SIX)
+    truth = plant_friction_map()
+    for i in (3, 4, 5):
+        assert fmap.joints[i].coulomb == pytest.approx(truth.joints[i].coulomb, rel=0.03)
+        assert fmap.joints[i].viscous == pytest.approx(truth.joints[i].viscous, rel=0.03)
+    assert fmap.joints[0] == model.friction.joints[0]
