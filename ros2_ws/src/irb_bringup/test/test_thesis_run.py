@@ -296,6 +296,35 @@ def test_quick_pipeline_end_to_end(tmp_path):
     # planned figures for both models: electrical above mechanical for every plan
     for name, v in s['planned_energy_j'].items():
         assert v['none'] > v['mechanical'], name
+    # --- six axes (issue 30): the rectangle glued with the nozzle normal to its plane ---
+    six = s['six_axis_rectangle']
+    assert '## Six axes: the rectangle glued with the nozzle normal to its plane' in report
+    assert '](plots/six_axis_rectangle.png)' in report
+    assert (out / 'plots' / 'six_axis_rectangle.png').stat().st_size > 10_000
+    # plan6 at the main job's gluing speed, within its played check's tolerances
+    assert six['duration_s'] == pytest.approx(cfg['rectangle']['duration_s'])
+    assert six['played_check_ok']
+    assert six['played_position_error_mm'] <= six['played_tolerances']['position_mm']
+    assert six['played_orientation_error_deg'] <= six['played_tolerances']['orientation_deg']
+    assert six['completed'] and not six['stop_reason'], six
+    # the feed-forward says what it is (quick: this job's joints 1-3, the nominal wrist), and
+    # its file is one pdplus joints:=6 loads (six joints, parametric)
+    assert 'joints 1-3 identified by this job' in six['friction_ff']
+    assert 'joints 4-6 nominal' in six['friction_ff']
+    from irb_control.closed_loop import controller_friction
+    from irb_description.six_axis_model import SixJointModel
+    ff = controller_friction(SixJointModel(), 'file', six['ff_map'])
+    assert len(ff.joints) == 6 and all(j.polynomial_positive is None for j in ff.joints)
+    # the goals stated with a verdict that agrees with the figures
+    assert six['goal_path_met'] == (six['path_error_max_mm'] <= 0.3)
+    assert six['goal_orientation_met'] == (six['orientation_error_max_deg'] <= 0.1)
+    for key in ('path', 'orientation'):
+        verdict = 'met' if six[f'goal_{key}_met'] else '**not met**'
+        goal = '0.3 mm' if key == 'path' else '0.1 deg'
+        assert f'≤ {goal}: {verdict}' in report, (key, verdict)
+    # executed energy (the plant's torques and speeds in PATH mode) near the plan's own
+    # played energy (the check's integral): the two share no code
+    assert six['executed_energy_j'] == pytest.approx(six['planned_energy_j'], rel=0.2)
     # placement: the region's grid, unreachable points counted, the best centre inside the
     # box and not worse than the optimal timing at the thesis placement on the same theta grid
     p = s['placement']

@@ -31,7 +31,8 @@ SPEC = NodeSpec(
         Param('out_report', '', '', "JSON report, '' = next to out_map (.json)"),
         Param('torque_kind', 'total', '', 'total (effort = joint torque) or friction'),
         Param('method', 'auto', '', 'auto | sweep | samples'),
-        Param('joints', [''], '', "joints to identify ('' = all)"),
+        Param('joints', [''], '', "joints to identify ('' = all); naming any of joint_4..6 "
+              'reads all six and uses the six-joint model (as identify --joints)'),
         Param('map_joint', [''], '', "renames 'BAG_NAME:NAME' as identify --map-joint"),
         Param('effort_lag_s', 0.0, 's', 'the effort acted this long before its stamp'),
         Param('min_speeds', 4, '', 'fewest speeds per joint (sweep)'),
