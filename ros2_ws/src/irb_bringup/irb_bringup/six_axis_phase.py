@@ -38,11 +38,12 @@ def path6_file(name: str = '') -> Path:
     return config_path().parent / 'path6_rectangle.yaml'
 
 
-def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, out: Path
-                     ) -> tuple[Path, str]:
+def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, out: Path,
+                     arm_label: str = 'identified by this job') -> tuple[Path, str]:
     """The six-joint feed-forward map pdplus joints:=6 loads, written to ``out``: joints 1-3
     from ``arm_map`` (the main job's identified map; None = nominal), joints 4-6 from
-    ``wrist_map`` (an identified wrist map; None = irb_description's nominal wrist_friction).
+    ``wrist_map`` (an identified wrist map; None = irb_description's nominal wrist_friction);
+    ``arm_label`` says where ``arm_map`` comes from.
     Polynomials are dropped (the parametric part is kept): the six-joint PD+ takes the
     wrist's Stribeck term on the measured speed, which needs a parametric map. Returns (path,
     label for the report)."""
@@ -59,8 +60,7 @@ def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, o
         poly = any(j.polynomial_positive is not None for j in arm.joints)
         joints[:3] = [replace(j, polynomial_positive=None, polynomial_negative=None)
                       for j in arm.joints]
-        parts.append('joints 1-3 identified by this job' + (' (parametric part)' if poly
-                                                            else ''))
+        parts.append(f'joints 1-3 {arm_label}' + (' (parametric part)' if poly else ''))
     else:
         parts.append('joints 1-3 nominal')
     if wrist_map is not None:
