@@ -278,7 +278,8 @@ def six_axis_section(res: dict, out: Path, wrist: dict | None = None) -> list[st
     if wrist:
         lines += ['Wrist friction identified in this job (six-joint sweeps, sample fit) '
                   'against the plant:', '',
-                  '| joint | F_c [N m] | plant | F_v [N m s/rad] | plant |', '|---|---|---|---|---|',
+                  '| joint | F_c [N m] | plant | F_v [N m s/rad] | plant |',
+                  '|---|---|---|---|---|',
                   *[f'| {n} | {r["coulomb"]:.3f} | {r["coulomb_true"]:.3f} | '
                     f'{r["viscous"]:.3f} | {r["viscous_true"]:.3f} |'
                     for n, r in wrist['joints'].items()], '']

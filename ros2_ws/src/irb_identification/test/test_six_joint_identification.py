@@ -166,3 +166,14 @@ def test_identifier_core_on_the_sweeps_as_one_stream(wrist_map, model, tmp_path)
         assert fmap.joints[i].coulomb == pytest.approx(truth.joints[i].coulomb, rel=0.03)
         assert fmap.joints[i].viscous == pytest.approx(truth.joints[i].viscous, rel=0.03)
     assert fmap.joints[0] == model.friction.joints[0]
+
+
+def test_complete_from_a_bad_map_is_one_line(tmp_path, capsys):
+    """--complete-from naming a missing map: one line naming it, exit 1, no map written."""
+    out = tmp_path / 'm.yaml'
+    assert identify.main(['--bag', str(tmp_path / 'none'), '--joints', 'joint_5', '--out',
+                          str(out), '--complete-from', str(tmp_path / 'nope.yaml')]) == 1
+    err = capsys.readouterr().err
+    assert '--complete-from: friction map' in err and 'nope.yaml' in err
+    assert 'does not exist' in err
+    assert not out.exists()
