@@ -51,7 +51,16 @@ def wrist_map(model, tmp_path_factory):
     return path, out
 
 
-def test_wrist_friction_recovered_and_pdplus_loads_the_map(wrist_map, model):
+def test_wrist_on_the_six_joint_simulator(wrist_map, model, tmp_path):
+    """One test around the sweeps (a module fixture is built once per xdist worker: three
+    tests on it cost two builds under -n 2): the oracle, the held-out check, the identifier
+    core."""
+    check_oracle_and_pdplus_loads_the_map(wrist_map, model)
+    check_held_out_motion_torque_predicted(wrist_map, model)
+    check_identifier_core_on_the_sweeps_as_one_stream(wrist_map, model, tmp_path)
+
+
+def check_oracle_and_pdplus_loads_the_map(wrist_map, model):
     """The fit recovers the plant's true wrist friction: Coulomb and viscous within 3 %, the
     map within 3 % of the true curve over 0.2-2 rad/s (above the Stribeck speeds, where the
     sweeps had steady speed); joints 1-3 copied from the nominal map, said in the source; the
@@ -82,7 +91,7 @@ def test_wrist_friction_recovered_and_pdplus_loads_the_map(wrist_map, model):
     assert ctrl.friction is fmap
 
 
-def test_held_out_motion_torque_predicted(wrist_map, model):
+def check_held_out_motion_torque_predicted(wrist_map, model):
     """Independent check: a motion the fit never saw (all three wrist joints at once, cosine
     strokes of different periods, another noise seed) on the six-joint simulator; its measured
     effort against rigid-body model + friction map, computed here (accelerations by
@@ -139,7 +148,7 @@ def test_held_out_motion_torque_predicted(wrist_map, model):
     assert np.all(ident * 3 <= nominal), (ident, nominal)
 
 
-def test_identifier_core_on_the_sweeps_as_one_stream(wrist_map, model, tmp_path):
+def check_identifier_core_on_the_sweeps_as_one_stream(wrist_map, model, tmp_path):
     """The identifier node's core (stream.py) with joints joint_4..6: the sweeps arrive as
     one live stream of six-joint JointStates; it keeps the wrist joints that stood still in
     each other's runs, subtracts the six-joint model and writes a six-joint map (complete_from
