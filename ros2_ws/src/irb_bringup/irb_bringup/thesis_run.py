@@ -10,7 +10,10 @@ On the simulator, each phase a node graph of separate processes (irb_control.pro
 5. a real-looking task: a gluing contour, a rectangle with blended corners in a tilted plane
    (config ``rectangle``), planned energy-optimally and as the trapezoid along arc length at
    the same duration, both executed by pdplus (following that path) with the identified
-   compensation, recorded;
+   compensation, recorded; and (config ``six_axis``, issue 30) the same rectangle with the
+   nozzle normal to its plane on six joints: plan6's energy-optimal plan at the same gluing
+   speed, its played check, and its run on the six-joint simulator (offline closed loop, in
+   process; six_axis_phase.py);
 6. the energy story (issue 17 item 6): the best placement of the thesis circle inside the
    config's region (``placement``; irb_planning.placement.search in process, with the
    identified map), its energy-optimal plan executed by pdplus following the circle at the
@@ -370,6 +373,19 @@ def main(args=None) -> int:
                 band)
         g.stop()
 
+        # 5, six axes (issue 30): the rectangle with the nozzle normal to its plane, in process
+        six_axis = None
+        six_cfg = cfg.get('six_axis') or {}
+        if six_cfg.get('enabled', False):
+            from .six_axis_phase import six_axis_step
+            t_phase = time.monotonic()
+            log(f'5/{PHASES} six axes: the rectangle with the nozzle normal to its plane '
+                '(irb_planning path6_rectangle.yaml), plan6 energy-optimal at the gluing speed, '
+                'played check, run on the six-joint simulator (in process)')
+            six_axis = six_axis_step(six_cfg, rect, out, fmap, log)
+            six_axis['step_wall_time_s'] = time.monotonic() - t_phase
+            log(f'   six axes: {six_axis["step_wall_time_s"]:.0f} s')
+
         # 6 ---------------------------------------------------------------------------------
         from .energy_report import placement_study
         pl = cfg['placement']
@@ -415,7 +431,8 @@ def main(args=None) -> int:
         # 8 ---------------------------------------------------------------------------------
         log(f'8/{PHASES} report')
         write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags,
-                     time.monotonic() - t_start, rect_file, placement, plant_el, cycle)
+                     time.monotonic() - t_start, rect_file, placement, plant_el, cycle,
+                     six_axis)
         log(f'done in {time.monotonic() - t_start:.0f} s: {out / "report.md"}')
         return 0
     except KeyboardInterrupt:
@@ -513,10 +530,11 @@ def write_rectangle(rect: dict, out: Path) -> Path:
 
 
 def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags, elapsed,
-                 rect_file=None, placement=None, plant_el=None, cycle=None):
+                 rect_file=None, placement=None, plant_el=None, cycle=None, six_axis=None):
     """Figures from the bags, plots, report.md and summary.json; ``placement``: phase 6's
     block (energy_report.placement_study), ``plant_el``: the simulator's electrical YAML,
-    ``cycle``: phase 7's work-cycle study (cycle_phase.run_cycle_phase) or None."""
+    ``cycle``: phase 7's work-cycle study (cycle_phase.run_cycle_phase) or None,
+    ``six_axis``: the six-axis step's figures (six_axis_phase.six_axis_step) or None."""
     from irb_description.friction import load_friction_map
     from irb_description.model import RobotModel
     from irb_description.path import CirclePath, load_path_file, path_spec
@@ -585,6 +603,9 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
     paths = {k: (rect if k.startswith('rect_') else CirclePath(
         np.asarray(centers.get(k) if centers.get(k) is not None else center, float), radius,
         0.0, 1)) for k in executed}
+    if six_axis is not None:
+        from .six_axis_phase import six_axis_section
+        sections += six_axis_section(six_axis, out, six_axis.get('wrist'))
     if cycle is not None:
         from .cycle_phase import cycle_section
         sections += cycle_section(cycle, out)
@@ -612,6 +633,8 @@ def write_report(run_id, out, cfg, executed, plans, fmap, plant_yaml, sweep_bags
                               planned_tcp_speed_peak_m_s=plans[k].tcp_speed_peak,
                               planned_tcp_accel_peak_m_s2=plans[k].tcp_accel_peak)
     summary.update({k: v for k, v in energy_summary.items() if k != 'log'})
+    if six_axis is not None:
+        summary['six_axis_rectangle'] = six_axis
     if cycle is not None:
         st = cycle['study']
         summary['work_cycle'] = {k: st[k] for k in (

@@ -80,6 +80,43 @@ def test_the_configured_gluing_band_holds_for_the_trapezoid(tmp_path, section):
     assert r.verification.tcp_accel_peak <= band['tcp_accel_max']
 
 
+def test_six_joint_feed_forward_map(tmp_path):
+    """The six-axis step's feed-forward file: joints 1-3 from the job's map with their
+    polynomials dropped (the six-joint PD+'s measured-speed Stribeck term needs a parametric
+    map), the wrist from a wrist map or the nominal wrist_friction, each said in the label;
+    pdplus joints:=6's loader and the six-joint PD+ take it."""
+    from dataclasses import replace
+
+    from irb_control.closed_loop import controller_friction, six_axis_controller_config
+    from irb_control.pd_plus import PdPlusController
+    from irb_description.friction import FrictionMap
+    from irb_description.path import thesis_circle
+    from irb_description.six_axis_model import SixJointModel, nominal_six_joint_friction
+
+    from irb_bringup.six_axis_phase import six_joint_ff_map
+    nominal = nominal_six_joint_friction()
+    arm = FrictionMap(nominal.joint_names[:3], tuple(
+        replace(j, coulomb=j.coulomb + 1.0, polynomial_positive=(1.0, 2.0),
+                polynomial_negative=(-1.0, 2.0)) for j in nominal.joints[:3]), 'arm')
+    arm.save(tmp_path / 'arm.yaml')
+    wrist = FrictionMap(nominal.joint_names[3:], tuple(
+        replace(j, viscous=j.viscous * 2) for j in nominal.joints[3:]), 'wrist')
+    wrist.save(tmp_path / 'wrist.yaml')
+    model = SixJointModel()
+    for wrist_file, words in ((None, 'joints 4-6 nominal wrist_friction'),
+                              (tmp_path / 'wrist.yaml', 'joints 4-6 identified')):
+        path, label = six_joint_ff_map(tmp_path / 'arm.yaml', wrist_file, tmp_path / 'ff.yaml')
+        assert 'joints 1-3 identified by this job (parametric part)' in label and words in label
+        ff = controller_friction(model, 'file', path)
+        assert all(j.polynomial_positive is None and j.polynomial_negative is None
+                   for j in ff.joints)
+        for i in range(3):
+            assert ff.joints[i].coulomb == nominal.joints[i].coulomb + 1.0
+        want = nominal.joints[3:] if wrist_file is None else wrist.joints
+        assert [j.viscous for j in ff.joints[3:]] == [j.viscous for j in want]
+        PdPlusController(model, thesis_circle(), six_axis_controller_config(), ff)
+
+
 def test_duty_cycle_figures_and_checks():
     """Per year = per cycle x cycles per hour x hours per year, in kWh (3.6 MJ) and cost; a
     duty cycle that does not fit an hour, or a malformed one, is refused with a reason."""
@@ -296,6 +333,35 @@ def test_quick_pipeline_end_to_end(tmp_path):
     # planned figures for both models: electrical above mechanical for every plan
     for name, v in s['planned_energy_j'].items():
         assert v['none'] > v['mechanical'], name
+    # --- six axes (issue 30): the rectangle glued with the nozzle normal to its plane ---
+    six = s['six_axis_rectangle']
+    assert '## Six axes: the rectangle glued with the nozzle normal to its plane' in report
+    assert '](plots/six_axis_rectangle.png)' in report
+    assert (out / 'plots' / 'six_axis_rectangle.png').stat().st_size > 10_000
+    # plan6 at the main job's gluing speed, within its played check's tolerances
+    assert six['duration_s'] == pytest.approx(cfg['rectangle']['duration_s'])
+    assert six['played_check_ok']
+    assert six['played_position_error_mm'] <= six['played_tolerances']['position_mm']
+    assert six['played_orientation_error_deg'] <= six['played_tolerances']['orientation_deg']
+    assert six['completed'] and not six['stop_reason'], six
+    # the feed-forward says what it is (quick: this job's joints 1-3, the nominal wrist), and
+    # its file is one pdplus joints:=6 loads (six joints, parametric)
+    assert 'joints 1-3 identified by this job' in six['friction_ff']
+    assert 'joints 4-6 nominal' in six['friction_ff']
+    from irb_control.closed_loop import controller_friction
+    from irb_description.six_axis_model import SixJointModel
+    ff = controller_friction(SixJointModel(), 'file', six['ff_map'])
+    assert len(ff.joints) == 6 and all(j.polynomial_positive is None for j in ff.joints)
+    # the goals stated with a verdict that agrees with the figures
+    assert six['goal_path_met'] == (six['path_error_max_mm'] <= 0.3)
+    assert six['goal_orientation_met'] == (six['orientation_error_max_deg'] <= 0.1)
+    for key in ('path', 'orientation'):
+        verdict = 'met' if six[f'goal_{key}_met'] else '**not met**'
+        goal = '0.3 mm' if key == 'path' else '0.1 deg'
+        assert f'≤ {goal}: {verdict}' in report, (key, verdict)
+    # executed energy (the plant's torques and speeds in PATH mode) near the plan's own
+    # played energy (the check's integral): the two share no code
+    assert six['executed_energy_j'] == pytest.approx(six['planned_energy_j'], rel=0.2)
     # placement: the region's grid, unreachable points counted, the best centre inside the
     # box and not worse than the optimal timing at the thesis placement on the same theta grid
     p = s['placement']

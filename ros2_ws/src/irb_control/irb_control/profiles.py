@@ -160,14 +160,14 @@ class TimeTrajectory:
         return float(self.t[-1] - self.t[0])
 
     def sample(self, t: float) -> np.ndarray:
-        """Row (9,): q (3), qd (3), qdd (3) at time t [s] since the start (clamped; after the
-        end the final position with zero speed and acceleration)."""
+        """Row (3 n,): q (n), qd (n), qdd (n) at time t [s] since the start (clamped; after
+        the end the final position with zero speed and acceleration)."""
         tt = self.t
         if t <= tt[0]:
             return self._table[0].copy()
         if t >= tt[-1]:
             row = self._table[-1].copy()
-            row[3:] = 0.0
+            row[row.size // 3:] = 0.0        # the rates of the n joints (n = 3 or 6)
             return row
         i = int(np.searchsorted(tt, t)) - 1
         w = (t - tt[i]) / (tt[i + 1] - tt[i])
@@ -288,8 +288,9 @@ def _sample_list(obj, x: float, zero_rates_after_end: bool) -> list:
         return rows[0][:]
     if x >= xl[-1]:
         row = rows[-1][:]
-        if zero_rates_after_end:
-            row[3:] = [0.0] * (len(row) - 3)
+        if zero_rates_after_end:        # q (n), qd (n), qdd (n): the rates are zero
+            n = len(row) // 3
+            row[n:] = [0.0] * (len(row) - n)
         return row
     i = bisect_left(xl, x) - 1          # = np.searchsorted(grid, x) - 1
     w = (x - xl[i]) / (xl[i + 1] - xl[i])

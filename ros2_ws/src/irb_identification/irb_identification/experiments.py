@@ -66,7 +66,9 @@ SPEC = NodeSpec(
     "pdplus's mode (works in lockstep on simulated time).",
     params=(
         Param('mode', 'offline', '', "'offline' (simulated plant) or 'ros'"),
-        Param('joints', ['joint_1', 'joint_2', 'joint_3'], '', 'joints to run'),
+        Param('joints', ['joint_1', 'joint_2', 'joint_3'], '', 'joints to run; naming any of '
+              'joint_4..6 runs the six-joint arm (offline: irb_control six-joint plant; ros: '
+              'trajectories of joint_1..6 for pdplus joints:=6)'),
         Param('speeds_rad_s', [float(c) for c in DEFAULT_SPEEDS], 'rad/s', 'hold speeds'),
         Param('accel_rad_s2', 8.0, 'rad/s^2', 'ramp acceleration a1 of eq. 4.1'),
         Param('stroke_rad', 0.8, 'rad', 'hold length: hold = stroke / speed'),
@@ -75,7 +77,7 @@ SPEC = NodeSpec(
         Param('periods', 1, '', 'back-and-forth periods per run'),
         Param('settle_s', 0.5, 's', 'standstill before the first period'),
         Param('center_rad', list(DEFAULT_CENTER), 'rad', 'pose the moving joint is centred on '
-              '(the other joints stand there)'),
+              '(the other joints stand there); 3 values (six joints: the wrist at 0) or 6'),
         Param('root', '', '', "bag root; '' = $IRB_ROOT/bags or ./bags"),
         Param('prefix', '', '', "bag name prefix; '' = friction_<date>_<time>"),
         Param('plant_friction_file', '', '', "offline plant friction map; '' = "
@@ -146,8 +148,14 @@ class ExperimentsNode(Node):
         for t in (self.js_topic, self.state_topic):
             if t not in self.record_topics:
                 self.record_topics.append(t)
-        from irb_description.model import RobotModel
-        self.model = RobotModel.load()
+        from .six_joint import SixJointIdentificationModel, six_joint_center, uses_wrist
+        self.six = uses_wrist(self.joints)      # joints 4-6 asked for: the whole arm
+        if self.six:
+            self.model = SixJointIdentificationModel()
+            self.center = six_joint_center(self.center)
+        else:
+            from irb_description.model import RobotModel
+            self.model = RobotModel.load()
         unknown = [j for j in self.joints if j not in self.model.joint_names]
         if unknown:
             raise ValueError(f'unknown joints {unknown}, expected {self.model.joint_names}')
@@ -167,7 +175,11 @@ class ExperimentsNode(Node):
                     if self.plant_map else self.model.friction)
         bags = []
         for j, prof, q0, name in self.runs():
-            run = simulate(self.model, friction, prof, j, q0, self.sim)
+            if self.six:       # irb_control's six-joint plant and PD+ (six_joint.py)
+                from .six_joint import simulate_six
+                run = simulate_six(self.model, friction, prof, j, q0, self.sim)
+            else:
+                run = simulate(self.model, friction, prof, j, q0, self.sim)
             bags.append(write_run_bag(run, self.root / name, self.model.joint_names,
                                       custom_data={'plant_friction': friction.source}))
             self.get_logger().info(f'{name}: {prof.duration:.1f} s, {len(run.t)} samples')
@@ -326,11 +338,13 @@ def main(args=None):
             bags = node.run_ros(executor)
         else:
             raise ValueError(f"mode must be 'offline' or 'ros', not {node.mode!r}")
+        extra = (f" --joints {','.join(node.joints)} --effort-lag-s 0.0024192 "
+                 '--complete-from nominal' if node.six else '')
         print('identify with:\n  ros2 run irb_identification identify '
-              + ' '.join(f'--bag {b}' for b in bags) + ' --out friction_map.yaml')
+              + ' '.join(f'--bag {b}' for b in bags) + extra + ' --out friction_map.yaml')
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (RunError, *CONFIG_ERRORS) as exc:
+    except (RunError, RuntimeError, *CONFIG_ERRORS) as exc:
         print(f'experiments: {exc}', file=sys.stderr)
         return 1
     finally:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from irb_description.friction import FrictionMap, JointFriction
+from irb_description.friction import FrictionMap, JointFriction, load_friction_map
 from numpy.polynomial import Polynomial
 from scipy import stats
 from scipy.optimize import least_squares, lsq_linear
@@ -397,3 +397,26 @@ def friction_map(results: list[JointResult], source: str,
     if missing and fill is not None:
         source += f' (not identified, from {fill.source}: {", ".join(missing)})'
     return FrictionMap(tuple(names), tuple(joints), source)
+
+
+def complete_source(spec: str, model):
+    """The map ``--complete-from`` names (None for ''), for the model's joints; 'nominal' =
+    the model's nominal map. FrictionMapError (one line) when it lacks a joint or is bad."""
+    if not spec:
+        return None
+    if spec == 'nominal':
+        return model.friction
+    return load_friction_map(spec, model.joint_names)
+
+
+def complete_map(fmap: FrictionMap, base: FrictionMap, order) -> FrictionMap:
+    """``fmap`` plus the joints of ``order`` it lacks, taken from ``base``, in ``order``
+    (joints of ``fmap`` outside ``order`` follow); the source says which were copied."""
+    names = [n for n in order if n in fmap.joint_names or n in base.joint_names]
+    names += [n for n in fmap.joint_names if n not in names]
+    copied = [n for n in names if n not in fmap.joint_names]
+    joints = tuple(fmap.joints[fmap.joint_names.index(n)] if n in fmap.joint_names
+                   else base.joints[base.joint_names.index(n)] for n in names)
+    source = fmap.source + (f' (not identified here, from {base.source}: '
+                            f'{", ".join(copied)})' if copied else '')
+    return FrictionMap(tuple(names), joints, source)

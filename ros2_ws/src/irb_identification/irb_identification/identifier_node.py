@@ -31,7 +31,8 @@ SPEC = NodeSpec(
         Param('out_report', '', '', "JSON report, '' = next to out_map (.json)"),
         Param('torque_kind', 'total', '', 'total (effort = joint torque) or friction'),
         Param('method', 'auto', '', 'auto | sweep | samples'),
-        Param('joints', [''], '', "joints to identify ('' = all)"),
+        Param('joints', [''], '', "joints to identify ('' = all); naming any of joint_4..6 "
+              'reads all six and uses the six-joint model (as identify --joints)'),
         Param('map_joint', [''], '', "renames 'BAG_NAME:NAME' as identify --map-joint"),
         Param('effort_lag_s', 0.0, 's', 'the effort acted this long before its stamp'),
         Param('min_speeds', 4, '', 'fewest speeds per joint (sweep)'),
@@ -49,6 +50,8 @@ SPEC = NodeSpec(
         Param('fill_nominal', False, '', "failed model joints from irb_description's nominal "
               'map (said so in the source)'),
         Param('plots_dir', '', '', "one figure per joint there, '' = none"),
+        Param('complete_from', '', '', "add the model's joints not identified from this map "
+              "('nominal' = irb_description's; as identify --complete-from), '' = none"),
     ),
     subscribes=(Topic('/joint_states', 'sensor_msgs/JointState', 'the stream (param topic)'),
                 Topic('/replay/status', 'std_msgs/String', "replay's status (latched)")),
@@ -94,12 +97,18 @@ def _make_node_class():
                 torque_kind=p['torque_kind'], joints=[j for j in p['joints'] if j],
                 name_map=name_map, out_map=p['out_map'], out_report=p['out_report'],
                 fill_nominal=bool(p['fill_nominal']), plots_dir=p['plots_dir'],
+                complete_from=p['complete_from'],
                 pipeline=PipelineConfig(
                     method=p['method'],
                     fit=FitConfig(min_speeds=int(p['min_speeds']),
                                   segments=SegmentConfig(effort_lag_s=float(p['effort_lag_s']))),
                     samples=SampleFitConfig(v_min=float(p['v_min']))))
-            self.core = StreamIdentifier(config, RobotModel.load())
+            if config.six_joints:     # joints 4-6 asked for: the six-joint model
+                from .six_joint import SixJointIdentificationModel
+                model = SixJointIdentificationModel()
+            else:
+                model = RobotModel.load()
+            self.core = StreamIdentifier(config, model)
             self.map_pub = self.create_publisher(String, '~/friction_map', latched_qos())
             self.create_subscription(String, p['status_topic'], self._on_status, latched_qos())
             self.create_service(Trigger, '~/compute', self._srv_compute)

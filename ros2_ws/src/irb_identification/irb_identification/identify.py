@@ -13,6 +13,11 @@ was missing (``data_quality`` in the JSON, the map's ``source``, one line per se
 identified with a trusted fit; 2: some joints failed or are marked degenerate (the map says
 which, with the reason); 1: nothing identified, no usable bag, a refused gap, or bad names.
 ``--json`` is written in every case.
+
+Joints 4-6 (issue 30): ``--joints`` naming any of joint_4 .. joint_6 reads the six joints of
+/joint_states (also the ones that stood still) and subtracts the six-joint model's rigid-body
+torque (irb_description ``SixJointModel``; six_joint.py); ``--complete-from MAP|nominal`` adds
+the joints not identified here, so that pdplus ``joints:=6`` can load the map.
 """
 from __future__ import annotations
 
@@ -24,10 +29,12 @@ from pathlib import Path
 
 import yaml
 
+from irb_description.friction import FrictionMapError
 from irb_description.node_help import own_args
 
 from .bagio import BagError
-from .friction_fit import FitConfig, IdentificationError, friction_map
+from .friction_fit import (FitConfig, IdentificationError, complete_map, complete_source,
+                           friction_map)
 from .gaps import ON_GAP, GapConfig, GapError
 from .pipeline import (METHODS, PipelineConfig, check_gaps, identify_joints, report_entry,
                        summary_line)
@@ -72,6 +79,11 @@ def _parser() -> argparse.ArgumentParser:
                    help='sweep: per-sign points = torque - model M qdd + C qd + g')
     p.add_argument('--fill-nominal', action='store_true',
                    help='write joints that fail with the nominal friction of irb_description')
+    p.add_argument('--complete-from', default='', metavar='MAP|nominal',
+                   help="add the model's joints not identified here from this friction map "
+                   "('nominal' = irb_description's), so that the map has every joint the "
+                   'controller loads (e.g. --joints joint_4,joint_5,joint_6 --complete-from '
+                   'the joints 1-3 map: a map pdplus joints:=6 reads)')
     p.add_argument('--effort-lag-s', type=float, default=0.0,
                    help='[s] sweep: the effort of a sample is the torque that acted this long '
                    'before it (see README)')
@@ -136,14 +148,25 @@ def main(args=None) -> int:
                          on_gap=opts.gaps)
     except ValueError as exc:
         return finish(1, str(exc))
-    from irb_description.model import RobotModel
-    model = RobotModel.load()
+    from .six_joint import SixJointIdentificationModel, uses_wrist
+    joints = [j.strip() for j in opts.joints.split(',') if j.strip()]
+    six = uses_wrist(joints)     # joint_4 .. joint_6 asked for: the six-joint model
+    if six:
+        model = SixJointIdentificationModel()
+    else:
+        from irb_description.model import RobotModel
+        model = RobotModel.load()
+    report['model_joints'] = list(model.joint_names)
+    try:
+        base = complete_source(opts.complete_from, model)
+    except FrictionMapError as exc:
+        return finish(1, f'--complete-from: {exc}')
     series, labels, kinds, accels, bags_read = [], [], [], [], []
     bags = [str(b) for b in expand_bags(opts.bag)]
     report['bags'] = bags
     for bag in bags:
         try:
-            s = read_joint_states(bag, opts.topic)
+            s = read_joint_states(bag, opts.topic, keep_locked=six)
             accel = _read_accel(bag)
         except (BagError, JointStateError) as exc:
             report['problems'].append(str(exc))
@@ -165,7 +188,6 @@ def main(args=None) -> int:
                                              split_gap_s=gaps.split_s())),
         samples=SampleFitConfig(v_min=opts.v_min, v_min_fraction=opts.v_min_fraction),
         gaps=gaps)
-    joints = [j.strip() for j in opts.joints.split(',') if j.strip()]
     try:
         series, checks = check_gaps(series, bags_read, gaps, opts.topic)
     except GapError as exc:
@@ -203,6 +225,9 @@ def main(args=None) -> int:
         fmap = friction_map(results, source, fill)
     except IdentificationError as exc:
         return finish(1, str(exc))
+    if base is not None:
+        fmap = complete_map(fmap, base, model.joint_names)
+        report['completed_from'] = base.source
     out = Path(opts.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fmap.save(out)

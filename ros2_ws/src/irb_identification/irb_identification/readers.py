@@ -110,17 +110,17 @@ def read_topics(bag, topics, optional=()) -> tuple[dict[str, TopicMessages], dic
 
 
 def joint_series(msgs: TopicMessages, bag, require=FIELDS,
-                 joints: list[str] | None = None) -> JointSeries:
+                 joints: list[str] | None = None, keep_locked: bool = False) -> JointSeries:
     """JointSeries of one JointState topic; errors name the bag, the topic and what it
     lacks. ``joints``: select these columns by name (others, e.g. locked joints 4-6, are
-    dropped)."""
+    dropped). ``keep_locked``: joints 4-6 stay even where they stood still (six joints)."""
     topic = msgs.topic
     if msgs.msgtype != JOINT_STATE:
         raise BagError(f'bag {bag}: {topic} is {msgs.msgtype}, not {JOINT_STATE}')
     if not msgs.data:
         raise BagError(f'bag {bag}: {topic} has no messages')
     try:
-        s = decode_joint_states(msgs.data, msgs.t_ns, require, joints)
+        s = decode_joint_states(msgs.data, msgs.t_ns, require, joints, keep_locked)
         return s.select(list(joints)) if joints else s
     except JointStateError as exc:
         what = QUANTITY.get(topic)
@@ -128,12 +128,12 @@ def joint_series(msgs: TopicMessages, bag, require=FIELDS,
                                                         else '')) from None
 
 
-def read_joint_states(bag, topic: str = STATE_TOPIC, joints: list[str] | None = None
-                      ) -> JointSeries:
+def read_joint_states(bag, topic: str = STATE_TOPIC, joints: list[str] | None = None,
+                      keep_locked: bool = False) -> JointSeries:
     """Measured joint states (position, velocity, effort) of ``topic`` in a bag or its
-    companion."""
+    companion (``keep_locked``: joints 4-6 also where they stood still)."""
     msgs, src = read_topics(bag, [topic])
-    return joint_series(msgs[topic], src[topic], FIELDS, joints)
+    return joint_series(msgs[topic], src[topic], FIELDS, joints, keep_locked)
 
 
 def dedupe(series: JointSeries, keep: np.ndarray) -> JointSeries:

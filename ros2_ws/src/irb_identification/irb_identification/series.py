@@ -138,7 +138,8 @@ FIELDS = ('position', 'velocity', 'effort')
 
 def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
                         require: tuple[str, ...] = FIELDS,
-                        unnamed: tuple[str, ...] | list[str] | None = None) -> JointSeries:
+                        unnamed: tuple[str, ...] | list[str] | None = None,
+                        keep_locked: bool = False) -> JointSeries:
     """JointSeries from CDR payloads (N,) and their log times [ns] (N,).
 
     Requires the same joint names in every message and, for each field of ``require``, that
@@ -146,6 +147,8 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
     (e.g. "no effort"). Fields not required and not carried are NaN (a torque command is a
     JointState with effort only: ``require=('effort',)``). ``unnamed``: joint names for
     messages without names (pdplus's /torque_command: effort of joints 1-3 in order).
+    ``keep_locked``: keep joints 4-6 even where they stood still (the six-joint
+    identification, six_joint.py); default: ``without_locked``.
     """
     if not data:
         raise JointStateError('no JointState messages')
@@ -191,7 +194,8 @@ def decode_joint_states(data: list[bytes], log_t_ns: list[int] | np.ndarray,
     if np.any(np.diff(t) < 0):
         order = np.argsort(t, kind='stable')
         t, out = t[order], out[:, order]
-    return without_locked(JointSeries(t * 1e-9, out_names, out[0], out[1], out[2]))
+    s = JointSeries(t * 1e-9, out_names, out[0], out[1], out[2])
+    return s if keep_locked else without_locked(s)
 
 
 LOCKED_STILL_RAD = 1e-3     # a locked joint whose position spans less than this stood still
@@ -247,7 +251,8 @@ def encode_joint_states(t_ns: np.ndarray, names: list[str], position: np.ndarray
     return [flat[i * L:(i + 1) * L] for i in range(N)]
 
 
-def read_joint_series(bag, topic: str = '/joint_states') -> JointSeries:
+def read_joint_series(bag, topic: str = '/joint_states', keep_locked: bool = False
+                      ) -> JointSeries:
     """JointSeries of ``topic`` in a bag; raises bagio.BagError / JointStateError naming the
     problem (missing bag or topic, corrupt file, wrong type, no effort ...)."""
     from .bagio import BagError, read_messages
@@ -257,6 +262,6 @@ def read_joint_series(bag, topic: str = '/joint_states') -> JointSeries:
     if not msgs.data:
         raise BagError(f'bag {bag}: {topic} has no messages')
     try:
-        return decode_joint_states(msgs.data, msgs.t_ns)
+        return decode_joint_states(msgs.data, msgs.t_ns, keep_locked=keep_locked)
     except JointStateError as exc:
         raise JointStateError(f'bag {bag}: {topic}: {exc}') from exc

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .friction_fit import IdentificationError, friction_map
+from irb_description.friction import FrictionMapError
+
+from .friction_fit import IdentificationError, complete_map, complete_source, friction_map
 from .pipeline import PipelineConfig, identify_joints, report_entry, summary_line
 from .series import JointStateError, decode_joint_states
 
@@ -62,7 +64,8 @@ class StreamConfig:
     partial); torque_kind: friction or total; joints, name_map: as identify --joints,
     --map-joint; out_map, out_report: where to write; fill_nominal: failed model joints
     from the nominal map (as identify --fill-nominal); plots_dir: one figure per joint
-    there ('' = none)."""
+    there ('' = none); complete_from: as identify --complete-from (MAP or 'nominal', '' =
+    none)."""
 
     topic: str = '/joint_states'
     max_messages: int = 2_000_000
@@ -76,6 +79,14 @@ class StreamConfig:
     fill_nominal: bool = False
     plots_dir: str = ''
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    complete_from: str = ''
+
+    @property
+    def six_joints(self) -> bool:
+        """``joints`` names any of joint_4 .. joint_6: the six joints are read (also those
+        that stood still) and the model is the six-joint one (six_joint.py)."""
+        from .six_joint import uses_wrist
+        return uses_wrist(self.joints)
 
 
 @dataclass
@@ -208,7 +219,8 @@ class StreamIdentifier:
         try:
             if self._n_decoded < len(self.data):
                 new = decode_joint_states(self.data[self._n_decoded:],
-                                          self.recv_ns[self._n_decoded:])
+                                          self.recv_ns[self._n_decoded:],
+                                          keep_locked=self.config.six_joints)
                 if self._decoded and new.names != self._decoded[0].names:
                     return []
                 self._decoded.append(new)
@@ -285,7 +297,7 @@ class StreamIdentifier:
         if not self.data:
             return self._fail(report, f'no {cfg.topic} message received')
         try:
-            s = decode_joint_states(self.data, self.recv_ns)
+            s = decode_joint_states(self.data, self.recv_ns, keep_locked=cfg.six_joints)
         except JointStateError as exc:
             return self._fail(report, f'{cfg.topic}: {exc}')
         finite = (np.isfinite(s.position).all(axis=1) & np.isfinite(s.velocity).all(axis=1)
@@ -322,6 +334,11 @@ class StreamIdentifier:
                     r.name in self.model.joint_names for r in results):
                 fill = self.model.friction
             fmap = friction_map(results, source, fill)
+            if cfg.complete_from and self.model is not None:
+                fmap = complete_map(fmap, complete_source(cfg.complete_from, self.model),
+                                    self.model.joint_names)
+        except FrictionMapError as exc:
+            return self._fail(report, f'complete_from: {exc}')
         except IdentificationError as exc:
             return self._fail(report, str(exc))
         out = Path(cfg.out_map)
