@@ -105,6 +105,8 @@ def simulate_six(model: SixJointModel, friction, profile: ConstantVelocityProfil
     HOLD. Logged per control period: the encoder sample (q, qd with the plant's noise,
     ``config.velocity_noise``) and the applied torque (+ ``config.effort_noise`` white noise),
     stamped with the sample time. RuntimeError (one line) if the controller stops.
+    ``feed_forward``: the controller's friction map (None: the nominal six-joint map, as
+    pdplus joints:=6 by default); no stiction prediction.
     """
     from irb_control.closed_loop import six_axis_controller_config
     from irb_control.pd_plus import MODE_HOLD, PdPlusController
@@ -120,8 +122,17 @@ def simulate_six(model: SixJointModel, friction, profile: ConstantVelocityProfil
     plant = Plant(model, PlantFriction.from_map(friction),
                   PlantConfig(period_s=period, initial_q=tuple(q0.tolist()),
                               velocity_noise_rad_s=config.velocity_noise, seed=config.seed))
-    # the path is not used by a time-driven reference (the controller needs one to exist)
-    ctrl = PdPlusController(model, thesis_circle(), six_axis_controller_config(),
+    if feed_forward is None:
+        # pdplus joints:=6's default feed-forward (friction_mode nominal): without any, the
+        # PD+ alone (no integral action in config/pdplus_six_axis.yaml) lags joint 6's 2 rad/s
+        # sweep by (F_c + F_v v) / Kp = 2.1 / 40 rad, over its 0.05 rad tracking limit
+        from irb_description.six_axis_model import nominal_six_joint_friction
+        feed_forward = nominal_six_joint_friction()
+    # the path is not used by a time-driven reference (the controller needs one to exist);
+    # no stiction prediction: it needs the wrist's friction known to a few percent (irb_control
+    # doc/six_joint.md), which is what these sweeps are run to find out
+    ctrl = PdPlusController(model, thesis_circle(),
+                            six_axis_controller_config(stiction_prediction=False),
                             feed_forward)
     ctrl.set_time_trajectory(TimeTrajectory(t_ref, q_ref, qd_ref, qdd_ref))
     ctrl.enable()
