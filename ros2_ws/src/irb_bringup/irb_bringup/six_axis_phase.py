@@ -110,14 +110,17 @@ def identify_wrist(out_dir: Path, speeds, hold_s: float, log=print) -> tuple[Pat
 
 
 def run_six_axis_rectangle(block: dict, rect: dict, out: Path, ff_file: Path, ff_label: str,
-                           log=print) -> dict:
+                           log=print, stiction_prediction: bool = True) -> dict:
     """Plan, check and run (module docstring); ``block``: the config's ``six_axis`` block,
-    ``rect``: its ``rectangle`` block (the gluing speed). Returns the figures (JSON-able)
+    ``rect``: its ``rectangle`` block (the gluing speed); ``stiction_prediction``: pdplus's
+    wrist stiction prediction (irb_control doc/six_joint.md: for an identified wrist map; with
+    the nominal one it does worse than without). Returns the figures (JSON-able)
     and writes ``out``/plots/six_axis_rectangle.png. SixAxisPlanError / RuntimeError (one
     line) when the plan is refused."""
     from dataclasses import replace
 
-    from irb_control.closed_loop import build_six_joint, energy, simulate_closed_loop
+    from irb_control.closed_loop import (build_six_joint, energy, simulate_closed_loop,
+                                         six_axis_controller_config)
     from irb_control.plant import PlantConfig
     from irb_control.profiles import profile_from_joint_trajectory
     from irb_description.params import load_kinematics
@@ -154,6 +157,7 @@ def run_six_axis_rectangle(block: dict, rect: dict, out: Path, ff_file: Path, ff
     t1 = time.monotonic()
     plant, ctrl = build_six_joint(
         prof, path, tcp, friction_mode='file', friction_file=ff_file, model=six,
+        controller_config=six_axis_controller_config(stiction_prediction=stiction_prediction),
         plant_config=PlantConfig(initial_q=tuple(prof.q[0].tolist()),
                                  seed=int(block.get('seed', 1))))
     r = simulate_closed_loop(plant, ctrl, float(tr['t'][-1]) + 1.5)
@@ -184,7 +188,8 @@ def run_six_axis_rectangle(block: dict, rect: dict, out: Path, ff_file: Path, ff
         'played_check_ok': bool(chk.ok), 'play_rate_hz': settings.play_rate_hz,
         'played_tolerances': {'position_mm': settings.path_tolerance_m * 1e3,
                               'orientation_deg': settings.orientation_tolerance_deg},
-        'friction_ff': ff_label, 'completed': bool(r.finished()),
+        'friction_ff': ff_label, 'stiction_prediction': bool(stiction_prediction),
+        'completed': bool(r.finished()),
         'stop_reason': r.stop_reason, 'sim_wall_time_s': sim_s,
         'path_error_max_mm': float(pos.max() * 1e3),
         'path_error_mean_mm': float(pos.mean() * 1e3),
@@ -256,7 +261,9 @@ def six_axis_section(res: dict, out: Path, wrist: dict | None = None) -> list[st
         f'{"within" if res["played_check_ok"] else "OUTSIDE"}).', '',
         'Run: six-joint PD+ (irb_control config/pdplus_six_axis.yaml) on the six-joint plant, '
         'offline closed loop (in process, the nodes\' step order), friction feed-forward: '
-        f'{res["friction_ff"]}.', '',
+        f'{res["friction_ff"]}; wrist stiction prediction '
+        f'{"on" if res.get("stiction_prediction") else "off (it needs an identified wrist map)"}'
+        '.', '',
         '| figure | value | goal |', '|---|---|---|',
         f'| path error max / mean [mm] | {res["path_error_max_mm"]:.3f} / '
         f'{res["path_error_mean_mm"]:.3f} | ≤ {res["goal_path_mm"]} mm: '
@@ -300,7 +307,8 @@ def six_axis_step(block: dict, rect: dict, out: Path, arm_map: Path | None, log=
                                                           [0.1, 0.3, 1.0, 2.0]),
                                           float(block.get('wrist_hold_s', 1.0)), log)
     ff_file, label = six_joint_ff_map(arm_map, wrist_map, work / 'six_joint_ff_map.yaml')
-    res = run_six_axis_rectangle(block, rect, out, ff_file, label, log)
+    res = run_six_axis_rectangle(block, rect, out, ff_file, label, log,
+                                 stiction_prediction=wrist_map is not None)
     res['ff_map'] = str(ff_file)
     res['wrist'] = wrist
     return res
