@@ -47,9 +47,10 @@ def load_text() -> str:
 
 
 def make_planner(spec):
-    from irb_planning.planner import Planner, PlannerSettings
-    return Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200, limit_cost=False,
-                                            play_rate_hz=1000.0, evaluation_rate_hz=1000.0))
+    from irb_planning.cycle import front_settings
+    from irb_planning.planner import Planner
+    return Planner(settings=front_settings(spec, play_rate_hz=1000.0,
+                                           evaluation_rate_hz=1000.0))
 
 
 def section_ten(cache_root: Path, jobs: int, cold: bool) -> dict:

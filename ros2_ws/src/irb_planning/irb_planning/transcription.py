@@ -198,6 +198,12 @@ def _within(u, v, rel: float) -> bool:
     return bool(np.all(np.abs(np.asarray(u, float) / np.asarray(v, float) - 1.0) <= rel))
 
 
+def _close_process(u: tuple, v: tuple, rel: float) -> bool:
+    """Process constraints (SolveRequest.process_key) field by field the same, or both set
+    (> 0) and within a relative distance ``rel``."""
+    return all(a == b or (a > 0 and b > 0 and abs(a / b - 1.0) <= rel) for a, b in zip(u, v))
+
+
 class Transcription:
     """The (a, b) NLP on one path and grid; ``solve`` is thread safe (one solve at a time)."""
 
@@ -207,14 +213,15 @@ class Transcription:
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
                  accel_rows: bool = False, band_rows: bool = False,
-                 jerk: JerkPath | None = None):
+                 jerk: JerkPath | None = None, warm_max_iter: int = 40):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
         ``tcp``: the path in task space, for process constraints (speed band as bounds);
         ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``); ``band_rows``:
         build the rows of b at the three quarter points of every interval, which only a TCP
-        speed band needs (without one they are implied: module docstring)."""
+        speed band needs (without one they are implied: module docstring); ``warm_max_iter``:
+        the warm solver's iteration cap (a warm solve that reaches it is repeated cold)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -403,6 +410,7 @@ class Transcription:
         # warm solver (capped iterations, then a cold solve takes over): built on the first
         # request that can use it; each IPOPT instance holds ~25-40 MiB at N = 200
         self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
+        self._warm_max_iter = int(warm_max_iter)
         self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
                                              ca.vec(tau_m), y, el_exact])
@@ -613,6 +621,9 @@ class Transcription:
         may differ: the planner's re-solve after its exact check tightens one joint's limit
         by a few per cent, and the next request starts from the nominal limits again; with
         identical limits required, every polyline plan in bench_paths.py was two cold solves.
+        The process constraints likewise: each the same, or both set and within 20 % (the
+        re-solve after the check tightened a TCP speed or acceleration bound by < 1 %; on the
+        gluing rectangle every front point was two cold solves of 40-115 iterations).
         A warm solve that fails is repeated cold (``solve``)."""
         if self._last is None:
             return False
@@ -622,7 +633,7 @@ class Transcription:
                 and last.min_theta_dot == req.min_theta_dot
                 and _within(req.velocity_limit, last.velocity_limit, 0.2)
                 and _within(req.torque_limit, last.torque_limit, 0.2)
-                and last.process_key == req.process_key)
+                and _close_process(last.process_key, req.process_key, 0.2))
         if req.duration > 0 and last.duration > 0:
             return same and _within(req.duration, last.duration, 0.2)
         return same and req.duration == last.duration
@@ -667,6 +678,18 @@ class Transcription:
             with self._lock:
                 self._last = saved
 
+    def _sibling_solver(self, name: str, options: dict):
+        """Another IPOPT instance of this NLP (other options) that reuses the cold solver's
+        derivative functions (objective gradient, constraint Jacobian, Lagrangian Hessian)
+        instead of deriving them again: the same functions, so the same numbers; building
+        the warm solver of a jerk-limited problem at N = 100 took 1.9-5 s with its own
+        derivatives and 0.3-1.2 s with these (cycle fronts, issue 29)."""
+        cold = self._solver_cold
+        opts = dict(options, grad_f=cold.get_function('nlp_grad_f'),
+                    jac_g=cold.get_function('nlp_jac_g'),
+                    hess_lag=cold.get_function('nlp_hess_l'))
+        return ca.nlpsol(name, 'ipopt', self._nlp, opts)
+
     def solve(self, req: SolveRequest, warm: bool | None = None,
               start: np.ndarray | None = None) -> TranscriptionResult:
         """Solve for ``req``; warm start from the previous solution when there is one.
@@ -686,9 +709,10 @@ class Transcription:
             t0 = time.perf_counter()
             if use_warm and self._close_to_last(req):
                 if self._solver_warm is None:
-                    self._solver_warm = ca.nlpsol(
-                        'transcription_warm', 'ipopt', self._nlp,
-                        ipopt_options(min(self._max_iter, 40), self._tol, warm=True))
+                    self._solver_warm = self._sibling_solver(
+                        'transcription_warm',
+                        ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
+                                      warm=True))
                 x0, lam_x, lam_g = self._last[:3]
                 x0 = np.clip(self._time_scaled(x0, self._last[3], req), lbx, ubx)
                 # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
@@ -712,9 +736,10 @@ class Transcription:
                 # problems of long durations (b pressed onto delta^2 almost everywhere; seen:
                 # 'Infeasible_Problem_Detected' at 59 s between solved 58 and 59.5 s); the
                 # adaptive update solves them. Built for the retry only, then released.
-                fallback = ca.nlpsol('transcription_adaptive', 'ipopt', self._nlp,
-                                     ipopt_options(self._max_iter, self._tol,
-                                                   extra={'mu_strategy': 'adaptive'}))
+                fallback = self._sibling_solver(
+                    'transcription_adaptive',
+                    ipopt_options(self._max_iter, self._tol,
+                                  extra={'mu_strategy': 'adaptive'}))
                 x0 = (self.initial_guess(req, lbx, ubx) if start is None
                       else np.clip(start, lbx, ubx))
                 sol = fallback(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
