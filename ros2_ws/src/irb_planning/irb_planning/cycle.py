@@ -56,6 +56,10 @@ GATE_RETRIES = 3
 #: cold solve took 40-110; at the planner's default cap of 40 most such warm solves stopped
 #: unfinished and were repeated cold (both paid)
 FRONT_WARM_ITERATIONS = 150
+#: how far apart (relative) front points may be for a warm start (PlannerSettings.warm_window;
+#: the planner's default 0.2): cycle_ten's neighbours on the 0.05 s grid are 10-25 % apart,
+#: and a warm start 21-25 % away took 34-59 iterations where the cold solve took 47-99
+FRONT_WARM_WINDOW = 0.3
 
 
 class CycleError(ValueError):
@@ -596,12 +600,14 @@ def _point_record(result, bus: str, electrical) -> dict:
 @dataclass
 class Front:
     """A motion's energy-duration front: points {duration: record}, the time-optimal plan
-    ('fastest', baseline A), durations refused (with the reason)."""
+    ('fastest', baseline A), durations refused (with the reason), CPU time [s] its process
+    spent on it in this call (planning; ~0 from the cache)."""
 
     name: str
     fastest: dict
     points: dict
     refused: dict = field(default_factory=dict)
+    cpu_s: float = 0.0
 
     def item(self) -> MotionItem:
         d = sorted(self.points)
@@ -650,6 +656,7 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
     refusal, or of the time-optimal plan, is a CycleError. ``cached_only``: None instead of
     planning when the cache lacks a plan."""
     from .request import ERROR_INFEASIBLE_DURATION, ERROR_SOLVER, PlanError
+    cpu0 = time.process_time()
     bus = energy_model.split('_', 1)[1]
     grid = spec.grid_size
     key = _cache_key(planner, op, spec, energy_model)
@@ -729,7 +736,7 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
         raise CycleError(f'motion {op.name}: every front duration was refused '
                          f'({"; ".join(sorted(set(cache["refused"].values())))[:200]})')
     return Front(op.name, fastest, pts, {float(k): v for k, v in cache['refused'].items()
-                                         if k in wanted})
+                                         if k in wanted}, time.process_time() - cpu0)
 
 
 # --- the whole cycle ----------------------------------------------------------------------
@@ -885,11 +892,15 @@ def restrict_modes(items: list, modes: tuple) -> list:
 
 def front_settings(spec: CycleSpec, **overrides):
     """PlannerSettings for a cycle's fronts: the spec's grid (200 if unset), no
-    cost-of-the-limits solve (the fronts' many plans need no such figure), the warm solver's
-    cap at FRONT_WARM_ITERATIONS; ``overrides``: other PlannerSettings fields."""
+    cost-of-the-limits solve (the fronts' many plans need no such figure), warm starts along
+    the front (each point from its neighbour, FRONT_WARM_ITERATIONS, FRONT_WARM_WINDOW; the
+    first from the time-optimal plan); ``overrides``: other PlannerSettings fields. The
+    warm starts change where IPOPT starts, not the problem: test_cycle_fronts.py compares
+    such a front with cold solves."""
     from .planner import PlannerSettings
     kw = dict(grid_size=spec.grid_size or 200, limit_cost=False,
-              warm_max_iterations=FRONT_WARM_ITERATIONS)
+              warm_max_iterations=FRONT_WARM_ITERATIONS, warm_window=FRONT_WARM_WINDOW,
+              warm_from_time_optimal=True)
     kw.update(overrides)
     return PlannerSettings(**kw)
 

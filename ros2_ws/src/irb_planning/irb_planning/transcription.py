@@ -213,7 +213,8 @@ class Transcription:
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
                  accel_rows: bool = False, band_rows: bool = False,
-                 jerk: JerkPath | None = None, warm_max_iter: int = 40):
+                 jerk: JerkPath | None = None, warm_max_iter: int = 40,
+                 warm_window: float = 0.2, warm_from_time_optimal: bool = False):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
@@ -221,7 +222,11 @@ class Transcription:
         ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``); ``band_rows``:
         build the rows of b at the three quarter points of every interval, which only a TCP
         speed band needs (without one they are implied: module docstring); ``warm_max_iter``:
-        the warm solver's iteration cap (a warm solve that reaches it is repeated cold)."""
+        the warm solver's iteration cap (a warm solve that reaches it is repeated cold);
+        ``warm_window``: how far (relative) a request's duration and limits may be from the
+        last solve's for a warm start (``_close_to_last``); ``warm_from_time_optimal``: a
+        fixed-duration request right after a time-optimal solve starts from that solution
+        played at its duration (``_time_optimal_start``)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -411,6 +416,8 @@ class Transcription:
         # request that can use it; each IPOPT instance holds ~25-40 MiB at N = 200
         self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
         self._warm_max_iter = int(warm_max_iter)
+        self._warm_window = float(warm_window)
+        self._warm_from_time_optimal = bool(warm_from_time_optimal)
         self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
                                              ca.vec(tau_m), y, el_exact])
@@ -617,7 +624,8 @@ class Transcription:
     def _close_to_last(self, req: SolveRequest) -> bool:
         """Warm starts pay off only near the last solution (IPOPT's dual warm start is
         unreliable after large changes): same weights, speed floor and process constraints,
-        duration and every speed and torque limit within 20 % of the last ones. The limits
+        duration and every speed and torque limit within 20 % (``warm_window``) of the last
+        ones. The limits
         may differ: the planner's re-solve after its exact check tightens one joint's limit
         by a few per cent, and the next request starts from the nominal limits again; with
         identical limits required, every polyline plan in bench_paths.py was two cold solves.
@@ -628,15 +636,42 @@ class Transcription:
         if self._last is None:
             return False
         last = self._last[3]
+        w = self._warm_window
         same = (last.energy_weight == req.energy_weight
                 and last.time_weight == req.time_weight
-                and last.min_theta_dot == req.min_theta_dot
-                and _within(req.velocity_limit, last.velocity_limit, 0.2)
-                and _within(req.torque_limit, last.torque_limit, 0.2)
-                and _close_process(last.process_key, req.process_key, 0.2))
+                and self._near(last, req))
         if req.duration > 0 and last.duration > 0:
-            return same and _within(req.duration, last.duration, 0.2)
+            return same and _within(req.duration, last.duration, w)
         return same and req.duration == last.duration
+
+    def _near(self, last: SolveRequest, req: SolveRequest) -> bool:
+        """Same speed floor; limits and process constraints within ``warm_window``."""
+        w = self._warm_window
+        return (last.min_theta_dot == req.min_theta_dot
+                and _within(req.velocity_limit, last.velocity_limit, w)
+                and _within(req.torque_limit, last.torque_limit, w)
+                and _close_process(last.process_key, req.process_key, w))
+
+    def _time_optimal_start(self, req: SolveRequest) -> np.ndarray | None:
+        """With ``warm_from_time_optimal``: the last solution, if it was time-optimal (the
+        planner's min_duration solve before every first plan on a problem), played at
+        ``req``'s fixed duration (as ``_time_scaled``), when that is within ``warm_window``
+        of its own and the limits are near (``_near``); else None. A primal start only: the
+        time objective's multipliers do not fit the energy objective. At a duration just
+        above the time-optimal one the energy optimum is nearly that profile (cycle_ten's
+        first front points: 24-25 instead of 47-51 iterations on the gluing rectangle and
+        the move to the circle, 37 for 37 on the circle)."""
+        if not self._warm_from_time_optimal or self._last is None or not req.duration > 0:
+            return None
+        x, _, _, last = self._last
+        if last.duration != 0 or not last.time_weight > 0 or not self._near(last, req):
+            return None
+        t_last = float(np.asarray(self._aux(x)[1]).ravel()[0])
+        if not (t_last > 0 and _within(req.duration, t_last, self._warm_window)):
+            return None
+        y = x.copy()
+        y[:self._nb + self._na] *= (t_last / req.duration) ** 2
+        return self._with_epigraph(y)
 
     def _time_scaled(self, x: np.ndarray, last: SolveRequest, req: SolveRequest) -> np.ndarray:
         """The last solution played at the new fixed duration: theta(t) -> theta(t k) with
@@ -707,18 +742,26 @@ class Transcription:
             p = [req.energy_weight, req.time_weight]
             use_warm = self.use_warm_start if warm is None else warm
             t0 = time.perf_counter()
+            warm_point = None
             if use_warm and self._close_to_last(req):
+                x0, lam_x, lam_g = self._last[:3]
+                x0 = self._time_scaled(x0, self._last[3], req)
+                # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
+                lam_g = np.where(np.isinf(lbg) & np.isinf(ubg), 0.0, lam_g)
+                warm_point = (x0, lam_x, lam_g)
+            elif use_warm:
+                x0 = self._time_optimal_start(req)
+                if x0 is not None:
+                    warm_point = (x0, np.zeros(lbx.size), np.zeros(lbg.size))
+            if warm_point is not None:
                 if self._solver_warm is None:
                     self._solver_warm = self._sibling_solver(
                         'transcription_warm',
                         ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
                                       warm=True))
-                x0, lam_x, lam_g = self._last[:3]
-                x0 = np.clip(self._time_scaled(x0, self._last[3], req), lbx, ubx)
-                # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
-                lam_g = np.where(np.isinf(lbg) & np.isinf(ubg), 0.0, lam_g)
-                sol = self._solver_warm(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
-                                        lam_x0=lam_x, lam_g0=lam_g)
+                x0, lam_x, lam_g = warm_point
+                sol = self._solver_warm(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx,
+                                        lbg=lbg, ubg=ubg, lam_x0=lam_x, lam_g0=lam_g)
                 stats = self._solver_warm.stats()
                 if not stats['success']:
                     use_warm = False
