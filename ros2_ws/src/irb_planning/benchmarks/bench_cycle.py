@@ -93,12 +93,11 @@ def section_ten(cache_root: Path, jobs: int, cold: bool, cold_runs: int = 1,
         if tag.startswith('cold'):
             shutil.copytree(cdir, cache, dirs_exist_ok=True)
             shutil.rmtree(cdir, ignore_errors=True)
-    colds = [v['wall_s'] for k, v in out.items() if k.startswith('cold')]
+    colds = [v for k, v in out.items() if k.startswith('cold')]
     if colds:
-        out['cold_wall_median_s'] = float(np.median(colds))
-        out['cold_cpu_median_s'] = float(np.median(
-            [v['cpu_fronts_s'] + v['cpu_main_s'] for k, v in out.items()
-             if k.startswith('cold')]))
+        out['cold_wall_median_s'] = float(np.median([v['wall_s'] for v in colds]))
+        out['cold_cpu_median_s'] = float(np.median([v['cpu_fronts_s'] + v['cpu_main_s']
+                                                    for v in colds]))
     return out
 
 

@@ -60,6 +60,10 @@ FRONT_WARM_ITERATIONS = 150
 #: the planner's default 0.2): cycle_ten's neighbours on the 0.05 s grid are 10-25 % apart,
 #: and a warm start 21-25 % away took 34-59 iterations where the cold solve took 47-99
 FRONT_WARM_WINDOW = 0.3
+#: IPOPT's initial barrier for a re-solve after the check tightened a bound (the gluing
+#: rectangle's band by <= 0.3 %; PlannerSettings.resolve_mu_init): 15-18 iterations instead
+#: of 28-45 at the warm solver's 1e-4, the same energies
+FRONT_RESOLVE_MU_INIT = 1e-6
 
 
 class CycleError(ValueError):
@@ -900,7 +904,7 @@ def front_settings(spec: CycleSpec, **overrides):
     from .planner import PlannerSettings
     kw = dict(grid_size=spec.grid_size or 200, limit_cost=False,
               warm_max_iterations=FRONT_WARM_ITERATIONS, warm_window=FRONT_WARM_WINDOW,
-              warm_from_time_optimal=True)
+              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT)
     kw.update(overrides)
     return PlannerSettings(**kw)
 

