@@ -44,18 +44,18 @@ def run_cycle_phase(cfg_cycle: dict, rect: dict, duty: dict, out: Path, log) -> 
     """Plan the cycle, write cycle/cycle_plan.json and the PNGs; the study's figures (dict,
     JSON-ready). Raises ValueError (one line) on a cycle that does not fit."""
     import numpy as np
-    from irb_planning.cycle import load_cycle, plan_cycle
+    from irb_planning.cycle import front_settings, load_cycle, plan_cycle
     from irb_planning.cycle_cli import write_outputs
     from irb_planning.cycle_study import (plot_sweep, plot_tornado, section_gluing,
                                           section_sweep, section_tornado)
-    from irb_planning.planner import Planner, PlannerSettings
+    from irb_planning.planner import Planner
     path = cycle_file(cfg_cycle)
     spec = load_cycle(path)
     why = glue_matches_rectangle(spec, rect)
     if why:
         raise ValueError(f'cycle {path}: {why} (thesis_run.yaml rectangle)')
-    # the fronts' many plans: no cost-of-the-limits solve (irb_planning's cycle does the same)
-    planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200, limit_cost=False))
+    # the fronts' planner settings (no cost-of-the-limits solve, warm starts along a front)
+    planner = Planner(settings=front_settings(spec))
     plan = plan_cycle(spec, planner, cache_dir=out / 'fronts', progress=lambda s: log(f'   {s}'),
                       jobs=int(cfg_cycle.get('jobs', 1)))
     out.mkdir(parents=True, exist_ok=True)

@@ -9,11 +9,14 @@ Sections (all by default; ``--section`` to pick):
   sweep    energy per cycle against the takt for the three (same fronts, DP per takt);
   tornado  the saving's sensitivity to each mode parameter over a plausible range;
   ten      a cycle of 10 operations (benchmarks/cycle_ten.yaml): wall time of the planning,
-           cold (empty front cache, --jobs processes) and warm (fronts cached), with the load.
+           cold (empty front cache, --jobs processes; --cold-runs of them, median) and warm
+           (fronts cached), with the load and the CPU seconds of every front (the figure a
+           shared machine's load does not inflate); under --ten-key (default 'ten').
 Prints JSON and writes results/cycle.json (sections not run keep their last results); PNGs
 to results/ (cycle_*.png).
 
     python ros2_ws/src/irb_planning/benchmarks/bench_cycle.py [--cache DIR] [--jobs 2]
+        [--section ten --cold-runs 3 --ten-key ten_<name>]
 """
 from __future__ import annotations
 
@@ -47,38 +50,54 @@ def load_text() -> str:
 
 
 def make_planner(spec):
-    from irb_planning.planner import Planner, PlannerSettings
-    return Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200, limit_cost=False,
-                                            play_rate_hz=1000.0, evaluation_rate_hz=1000.0))
+    from irb_planning.cycle import front_settings
+    from irb_planning.planner import Planner
+    return Planner(settings=front_settings(spec, play_rate_hz=1000.0,
+                                           evaluation_rate_hz=1000.0))
 
 
-def section_ten(cache_root: Path, jobs: int, cold: bool) -> dict:
+def section_ten(cache_root: Path, jobs: int, cold: bool, cold_runs: int = 1,
+                front_points: int = 0) -> dict:
+    from dataclasses import replace
     from irb_planning.cycle import load_cycle, plan_cycle
     spec = load_cycle(TEN)
+    if front_points:
+        spec = replace(spec, front_points=front_points)
     out = {'operations': len(spec.operations), 'motions': len(spec.motions), 'jobs': jobs,
-           'takt_s': spec.takt_s}
+           'takt_s': spec.takt_s, 'front_points': spec.front_points}
     cache = cache_root / 'ten'
     runs = []
-    if cold:
+    for k in range(cold_runs if cold else 0):
         cold_dir = Path(tempfile.mkdtemp(prefix='cycle_ten_cold_'))
-        runs.append(('cold', cold_dir, jobs))
+        runs.append(('cold' if k == 0 else f'cold_{k + 1}', cold_dir, jobs))
     runs.append(('warm', cache, 1))
     for tag, cdir, j in runs:
         load0 = load_text()
         t0 = time.perf_counter()
+        cpu0 = time.process_time()
         plan = plan_cycle(spec, make_planner(spec), cache_dir=cdir,
                           progress=lambda s: print(s, file=sys.stderr, flush=True), jobs=j)
         wall = time.perf_counter() - t0
+        # CPU: this process, and the fronts' planning in whichever process planned them
+        # (the machine is shared: CPU seconds are the figure load does not inflate)
         out[tag] = {'wall_s': wall, 'front_s': plan.front_time_s,
+                    'cpu_main_s': time.process_time() - cpu0,
+                    'cpu_fronts_s': float(sum(f.cpu_s for f in plan.fronts.values())),
+                    'front_cpu_s': {k: f.cpu_s for k, f in plan.fronts.items()},
                     'dp_s': plan.solution.solve_time_s, 'load_before': load0,
                     'load_after': load_text(), 'jobs': j, 'energy_j': plan.solution.total_j,
                     'gap_percent': 100 * plan.solution.gap_rel,
                     'saving_vs_a_percent': 100 * (1 - plan.solution.total_j
                                                   / plan.baseline_a['total_j']),
                     'goal_s': GOAL_TEN_S, 'goal_met': bool(wall <= GOAL_TEN_S)}
-        if tag == 'cold':
+        if tag.startswith('cold'):
             shutil.copytree(cdir, cache, dirs_exist_ok=True)
             shutil.rmtree(cdir, ignore_errors=True)
+    colds = [v for k, v in out.items() if k.startswith('cold')]
+    if colds:
+        out['cold_wall_median_s'] = float(np.median([v['wall_s'] for v in colds]))
+        out['cold_cpu_median_s'] = float(np.median([v['cpu_fronts_s'] + v['cpu_main_s']
+                                                    for v in colds]))
     return out
 
 
@@ -90,6 +109,13 @@ def main(argv=None):
     p.add_argument('--jobs', type=int, default=2, help='processes for the cold fronts')
     p.add_argument('--no-cold', action='store_true',
                    help='ten: skip the cold run (empty cache)')
+    p.add_argument('--cold-runs', type=int, default=1,
+                   help='ten: cold runs, each with an empty cache (median reported)')
+    p.add_argument('--front-points', type=int, default=0,
+                   help="ten: front points per motion instead of cycle_ten.yaml's")
+    p.add_argument('--ten-key', default='ten',
+                   help='ten: the key of results/cycle.json its figures go to (another key '
+                        'keeps the last ones beside them)')
     p.add_argument('--takts', type=float, nargs=3, default=[14.0, 120.0, 1.0],
                    metavar=('FROM', 'TO', 'STEP'), help='sweep [s]')
     a = p.parse_args(argv)
@@ -120,19 +146,17 @@ def main(argv=None):
             result['tornado'] = section_tornado(plan, takt)
             plot_tornado(result['tornado'], RESULTS / 'cycle_tornado.png')
     if 'ten' in a.section:
-        result['ten'] = section_ten(cache, a.jobs, not a.no_cold)
+        result[a.ten_key] = section_ten(cache, a.jobs, not a.no_cold, a.cold_runs,
+                                     a.front_points)
     result['load_end'] = load_text()
-    old = RESULTS / 'cycle.json'          # keep the sections not run this time
+    old = RESULTS / 'cycle.json'          # keep what this run did not measure again
     if old.is_file():
         import json
         kept = json.loads(old.read_text())
-        for sec in SECTIONS:
-            if sec not in a.section and sec in kept:
-                result[sec] = kept[sec]
-                if sec == 'ten':
-                    result['ten_load'] = kept.get('ten_load')
+        for key, value in kept.items():
+            result.setdefault(key, value)
     if 'ten' in a.section:
-        result['ten_load'] = [result['load_start'], result['load_end']]
+        result[f'{a.ten_key}_load'] = [result['load_start'], result['load_end']]
     dump('cycle', result)
     return 0
 

@@ -51,6 +51,19 @@ OP_KINDS = (OP_MOTION, OP_FIXED, OP_WAIT)
 CACHE_VERSION = 1
 #: re-plans of a front point at tighter limits when pdplus's plan gate would refuse it
 GATE_RETRIES = 3
+#: the warm solver's iteration cap for the fronts (PlannerSettings.warm_max_iterations): a
+#: front point warm-started from its neighbour 10-25 % shorter took 20-100 iterations where a
+#: cold solve took 40-110; at the planner's default cap of 40 most such warm solves stopped
+#: unfinished and were repeated cold (both paid)
+FRONT_WARM_ITERATIONS = 150
+#: how far apart (relative) front points may be for a warm start (PlannerSettings.warm_window;
+#: the planner's default 0.2): cycle_ten's neighbours on the 0.05 s grid are 10-25 % apart,
+#: and a warm start 21-25 % away took 34-59 iterations where the cold solve took 47-99
+FRONT_WARM_WINDOW = 0.3
+#: IPOPT's initial barrier for a re-solve after the check tightened a bound (the gluing
+#: rectangle's band by <= 0.3 %; PlannerSettings.resolve_mu_init): 15-18 iterations instead
+#: of 28-45 at the warm solver's 1e-4, the same energies
+FRONT_RESOLVE_MU_INIT = 1e-6
 
 
 class CycleError(ValueError):
@@ -591,12 +604,14 @@ def _point_record(result, bus: str, electrical) -> dict:
 @dataclass
 class Front:
     """A motion's energy-duration front: points {duration: record}, the time-optimal plan
-    ('fastest', baseline A), durations refused (with the reason)."""
+    ('fastest', baseline A), durations refused (with the reason), CPU time [s] its process
+    spent on it in this call (planning; ~0 from the cache)."""
 
     name: str
     fastest: dict
     points: dict
     refused: dict = field(default_factory=dict)
+    cpu_s: float = 0.0
 
     def item(self) -> MotionItem:
         d = sorted(self.points)
@@ -645,6 +660,7 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
     refusal, or of the time-optimal plan, is a CycleError. ``cached_only``: None instead of
     planning when the cache lacks a plan."""
     from .request import ERROR_INFEASIBLE_DURATION, ERROR_SOLVER, PlanError
+    cpu0 = time.process_time()
     bus = energy_model.split('_', 1)[1]
     grid = spec.grid_size
     key = _cache_key(planner, op, spec, energy_model)
@@ -724,7 +740,7 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
         raise CycleError(f'motion {op.name}: every front duration was refused '
                          f'({"; ".join(sorted(set(cache["refused"].values())))[:200]})')
     return Front(op.name, fastest, pts, {float(k): v for k, v in cache['refused'].items()
-                                         if k in wanted})
+                                         if k in wanted}, time.process_time() - cpu0)
 
 
 # --- the whole cycle ----------------------------------------------------------------------
@@ -741,14 +757,26 @@ def _front_worker(settings, op, spec, energy_model, cache_dir):
     return compute_front(_WORKER['planner'], op, spec, energy_model, cache_dir, say)
 
 
+def front_cost(op: Operation) -> tuple:
+    """A sort key for the planning cost of a motion's front, larger for costlier: process
+    constraints first (every point a solve with the band rows and, in cycle_ten, a second
+    one after the check tightened the band: the gluing rectangle was a third of the ten
+    operations' planning), then path pieces, then path length."""
+    from irb_description.path import path_from_spec
+    path = path_from_spec(op.path)
+    return (bool(op.process), int(np.asarray(path.breaks).size), float(path.length))
+
+
 def _fronts_parallel(settings, ms, spec, energy_model, cache_dir, progress, jobs) -> dict:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
     fronts = {}
     ctx = mp.get_context('forkserver')
     with ProcessPoolExecutor(max_workers=min(jobs, len(ms)), mp_context=ctx) as pool:
+        # the costliest first (the pool hands out in submission order): a long front
+        # started last would run alone while the other processes idle
         futs = {pool.submit(_front_worker, settings, op, spec, energy_model, cache_dir): op
-                for op in ms}
+                for op in sorted(ms, key=front_cost, reverse=True)}
         try:
             for k, fut in enumerate(as_completed(futs)):
                 op = futs[fut]
@@ -866,6 +894,21 @@ def restrict_modes(items: list, modes: tuple) -> list:
             if isinstance(it, StationItem) else it for it in items]
 
 
+def front_settings(spec: CycleSpec, **overrides):
+    """PlannerSettings for a cycle's fronts: the spec's grid (200 if unset), no
+    cost-of-the-limits solve (the fronts' many plans need no such figure), warm starts along
+    the front (each point from its neighbour, FRONT_WARM_ITERATIONS, FRONT_WARM_WINDOW; the
+    first from the time-optimal plan); ``overrides``: other PlannerSettings fields. The
+    warm starts change where IPOPT starts, not the problem: test_cycle_fronts.py compares
+    such a front with cold solves."""
+    from .planner import PlannerSettings
+    kw = dict(grid_size=spec.grid_size or 200, limit_cost=False,
+              warm_max_iterations=FRONT_WARM_ITERATIONS, warm_window=FRONT_WARM_WINDOW,
+              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT)
+    kw.update(overrides)
+    return PlannerSettings(**kw)
+
+
 def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
                cache_dir=None, progress=print, takt_s: float | None = None,
                jobs: int = 1) -> CyclePlan:
@@ -874,16 +917,14 @@ def plan_cycle(spec: CycleSpec, planner=None, modes: PowerModes | None = None,
     the motions' fronts in that many processes (each with its own Planner of the same
     settings; their progress lines go to stdout as they come)."""
     from irb_description.power_modes import load_power_modes
-    from .planner import Planner, PlannerSettings
+    from .planner import Planner
     t0 = time.perf_counter()
     if takt_s is not None:
         from dataclasses import replace
         spec = replace(spec, takt_s=float(takt_s))
     check_continuity(spec)
     if planner is None:
-        # the fronts' many plans: no cost-of-the-limits solve
-        planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
-                                                   limit_cost=False))
+        planner = Planner(settings=front_settings(spec))
     check_reachable(spec, planner.model)
     if modes is None:
         modes = load_power_modes(spec.power_modes or None, electrical=planner.electrical)

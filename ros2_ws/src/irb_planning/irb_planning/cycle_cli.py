@@ -141,13 +141,12 @@ def main(args=None):
         print(f'cycle: {exc}', file=sys.stderr)
         return 2
     out = Path(a.out)
-    from .planner import Planner, PlannerSettings
+    from .cycle import front_settings
+    from .planner import Planner
     try:
-        planner = Planner(settings=PlannerSettings(grid_size=spec.grid_size or 200,
-                                                   limit_cost=False,   # fronts' many plans
-                                                   play_rate_hz=a.check_rate,
-                                                   evaluation_rate_hz=a.check_rate,
-                                                   electrical_config=a.electrical))
+        planner = Planner(settings=front_settings(spec, play_rate_hz=a.check_rate,
+                                                  evaluation_rate_hz=a.check_rate,
+                                                  electrical_config=a.electrical))
         plan = plan_cycle(spec, planner, cache_dir=Path(a.cache) if a.cache
                           else out / 'fronts', progress=lambda s: print(s, flush=True),
                           takt_s=a.takt or None, jobs=a.jobs)

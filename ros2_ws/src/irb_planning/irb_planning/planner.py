@@ -79,6 +79,16 @@ class PlannerSettings:
     max_iterations: int = 1000
     tolerance: float = 1e-8
     warm_start: bool = True
+    # the warm solver's iteration cap; a warm solve that reaches it is repeated cold. 40
+    # suits a request near the last one; the cycle planner's fronts (durations 10-25 % apart)
+    # take 20-100 warm iterations, fewer than cold, and set more (cycle.FRONT_WARM_ITERATIONS)
+    warm_max_iterations: int = 40
+    # a warm start when the duration and limits are within this fraction of the last solve's
+    warm_window: float = 0.2
+    # the first fixed-duration solve after the time-optimal one starts from its solution
+    warm_from_time_optimal: bool = False
+    # > 0: IPOPT's initial barrier for a warm re-solve at the same duration (0: 1e-4)
+    resolve_mu_init: float = 0.0
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
     # the independent check plays the message by quintic interpolation at this rate (and at
@@ -327,7 +337,10 @@ class Planner:
                            bus_mode=mode or 'shared',
                            electrical_smoothing=s.electrical_smoothing_w,
                            tcp=tcp_path(path, theta), accel_rows=accel_rows,
-                           band_rows=band_rows, jerk=jerk)
+                           band_rows=band_rows, jerk=jerk,
+                           warm_max_iter=s.warm_max_iterations, warm_window=s.warm_window,
+                           warm_from_time_optimal=s.warm_from_time_optimal,
+                           resolve_mu_init=s.resolve_mu_init)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm

@@ -198,6 +198,12 @@ def _within(u, v, rel: float) -> bool:
     return bool(np.all(np.abs(np.asarray(u, float) / np.asarray(v, float) - 1.0) <= rel))
 
 
+def _close_process(u: tuple, v: tuple, rel: float) -> bool:
+    """Process constraints (SolveRequest.process_key) field by field the same, or both set
+    (> 0) and within a relative distance ``rel``."""
+    return all(a == b or (a > 0 and b > 0 and abs(a / b - 1.0) <= rel) for a, b in zip(u, v))
+
+
 class Transcription:
     """The (a, b) NLP on one path and grid; ``solve`` is thread safe (one solve at a time)."""
 
@@ -207,14 +213,24 @@ class Transcription:
                  sides: tuple | None = None, electrical=None, bus_mode: str = 'shared',
                  electrical_smoothing: float = 0.5, tcp: TcpPath | None = None,
                  accel_rows: bool = False, band_rows: bool = False,
-                 jerk: JerkPath | None = None):
+                 jerk: JerkPath | None = None, warm_max_iter: int = 40,
+                 warm_window: float = 0.2, warm_from_time_optimal: bool = False,
+                 resolve_mu_init: float = 0.0):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
         ``tcp``: the path in task space, for process constraints (speed band as bounds);
         ``accel_rows``: build the |TCP acceleration| rows too (needs ``tcp``); ``band_rows``:
         build the rows of b at the three quarter points of every interval, which only a TCP
-        speed band needs (without one they are implied: module docstring)."""
+        speed band needs (without one they are implied: module docstring); ``warm_max_iter``:
+        the warm solver's iteration cap (a warm solve that reaches it is repeated cold);
+        ``warm_window``: how far (relative) a request's duration and limits may be from the
+        last solve's for a warm start (``_close_to_last``); ``warm_from_time_optimal``: a
+        fixed-duration request right after a time-optimal solve starts from that solution
+        played at its duration (``_time_optimal_start``); ``resolve_mu_init`` > 0: IPOPT's
+        initial barrier parameter for a warm re-solve at the last solve's own duration (the
+        planner's re-solve after its check tightened a limit or a process bound by < 1 %;
+        0: the warm solver's 1e-4)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -403,6 +419,11 @@ class Transcription:
         # warm solver (capped iterations, then a cold solve takes over): built on the first
         # request that can use it; each IPOPT instance holds ~25-40 MiB at N = 200
         self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
+        self._warm_max_iter = int(warm_max_iter)
+        self._warm_window = float(warm_window)
+        self._warm_from_time_optimal = bool(warm_from_time_optimal)
+        self._resolve_mu_init = float(resolve_mu_init)
+        self._solver_resolve = None
         self._solver_warm = None
         self._aux = ca.Function('aux', [x], [energy_exact, duration, ca.vec(tau_n),
                                              ca.vec(tau_m), y, el_exact])
@@ -609,23 +630,54 @@ class Transcription:
     def _close_to_last(self, req: SolveRequest) -> bool:
         """Warm starts pay off only near the last solution (IPOPT's dual warm start is
         unreliable after large changes): same weights, speed floor and process constraints,
-        duration and every speed and torque limit within 20 % of the last ones. The limits
+        duration and every speed and torque limit within 20 % (``warm_window``) of the last
+        ones. The limits
         may differ: the planner's re-solve after its exact check tightens one joint's limit
         by a few per cent, and the next request starts from the nominal limits again; with
         identical limits required, every polyline plan in bench_paths.py was two cold solves.
+        The process constraints likewise: each the same, or both set and within 20 % (the
+        re-solve after the check tightened a TCP speed or acceleration bound by < 1 %; on the
+        gluing rectangle every front point was two cold solves of 40-115 iterations).
         A warm solve that fails is repeated cold (``solve``)."""
         if self._last is None:
             return False
         last = self._last[3]
+        w = self._warm_window
         same = (last.energy_weight == req.energy_weight
                 and last.time_weight == req.time_weight
-                and last.min_theta_dot == req.min_theta_dot
-                and _within(req.velocity_limit, last.velocity_limit, 0.2)
-                and _within(req.torque_limit, last.torque_limit, 0.2)
-                and last.process_key == req.process_key)
+                and self._near(last, req))
         if req.duration > 0 and last.duration > 0:
-            return same and _within(req.duration, last.duration, 0.2)
+            return same and _within(req.duration, last.duration, w)
         return same and req.duration == last.duration
+
+    def _near(self, last: SolveRequest, req: SolveRequest) -> bool:
+        """Same speed floor; limits and process constraints within ``warm_window``."""
+        w = self._warm_window
+        return (last.min_theta_dot == req.min_theta_dot
+                and _within(req.velocity_limit, last.velocity_limit, w)
+                and _within(req.torque_limit, last.torque_limit, w)
+                and _close_process(last.process_key, req.process_key, w))
+
+    def _time_optimal_start(self, req: SolveRequest) -> np.ndarray | None:
+        """With ``warm_from_time_optimal``: the last solution, if it was time-optimal (the
+        planner's min_duration solve before every first plan on a problem), played at
+        ``req``'s fixed duration (as ``_time_scaled``), when that is within ``warm_window``
+        of its own and the limits are near (``_near``); else None. A primal start only: the
+        time objective's multipliers do not fit the energy objective. At a duration just
+        above the time-optimal one the energy optimum is nearly that profile (cycle_ten's
+        first front points: 24-25 instead of 47-51 iterations on the gluing rectangle and
+        the move to the circle, 37 for 37 on the circle)."""
+        if not self._warm_from_time_optimal or self._last is None or not req.duration > 0:
+            return None
+        x, _, _, last = self._last
+        if last.duration != 0 or not last.time_weight > 0 or not self._near(last, req):
+            return None
+        t_last = float(np.asarray(self._aux(x)[1]).ravel()[0])
+        if not (t_last > 0 and _within(req.duration, t_last, self._warm_window)):
+            return None
+        y = x.copy()
+        y[:self._nb + self._na] *= (t_last / req.duration) ** 2
+        return self._with_epigraph(y)
 
     def _time_scaled(self, x: np.ndarray, last: SolveRequest, req: SolveRequest) -> np.ndarray:
         """The last solution played at the new fixed duration: theta(t) -> theta(t k) with
@@ -667,6 +719,18 @@ class Transcription:
             with self._lock:
                 self._last = saved
 
+    def _sibling_solver(self, name: str, options: dict):
+        """Another IPOPT instance of this NLP (other options) that reuses the cold solver's
+        derivative functions (objective gradient, constraint Jacobian, Lagrangian Hessian)
+        instead of deriving them again: the same functions, so the same numbers; building
+        the warm solver of a jerk-limited problem at N = 100 took 1.9-5 s with its own
+        derivatives and 0.3-1.2 s with these (cycle fronts, issue 29)."""
+        cold = self._solver_cold
+        opts = dict(options, grad_f=cold.get_function('nlp_grad_f'),
+                    jac_g=cold.get_function('nlp_jac_g'),
+                    hess_lag=cold.get_function('nlp_hess_l'))
+        return ca.nlpsol(name, 'ipopt', self._nlp, opts)
+
     def solve(self, req: SolveRequest, warm: bool | None = None,
               start: np.ndarray | None = None) -> TranscriptionResult:
         """Solve for ``req``; warm start from the previous solution when there is one.
@@ -684,18 +748,37 @@ class Transcription:
             p = [req.energy_weight, req.time_weight]
             use_warm = self.use_warm_start if warm is None else warm
             t0 = time.perf_counter()
+            warm_point, resolve = None, False
             if use_warm and self._close_to_last(req):
-                if self._solver_warm is None:
-                    self._solver_warm = ca.nlpsol(
-                        'transcription_warm', 'ipopt', self._nlp,
-                        ipopt_options(min(self._max_iter, 40), self._tol, warm=True))
+                resolve = self._resolve_mu_init > 0 and req.duration == self._last[3].duration
                 x0, lam_x, lam_g = self._last[:3]
-                x0 = np.clip(self._time_scaled(x0, self._last[3], req), lbx, ubx)
+                x0 = self._time_scaled(x0, self._last[3], req)
                 # a row now unbounded (the jerk rows of solve_without_jerk) has no multiplier
                 lam_g = np.where(np.isinf(lbg) & np.isinf(ubg), 0.0, lam_g)
-                sol = self._solver_warm(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
-                                        lam_x0=lam_x, lam_g0=lam_g)
-                stats = self._solver_warm.stats()
+                warm_point = (x0, lam_x, lam_g)
+            elif use_warm:
+                x0 = self._time_optimal_start(req)
+                if x0 is not None:
+                    warm_point = (x0, np.zeros(lbx.size), np.zeros(lbg.size))
+            if warm_point is not None:
+                if resolve and self._solver_resolve is None:
+                    # the same duration, bounds moved by < 1 %: the last point is nearly
+                    # optimal, a small barrier keeps it (glue of cycle_ten: 15-18 instead
+                    # of 28-45 iterations, the same energies to 1e-8 relative)
+                    self._solver_resolve = self._sibling_solver(
+                        'transcription_resolve',
+                        ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
+                                      warm=True, extra={'mu_init': self._resolve_mu_init}))
+                if not resolve and self._solver_warm is None:
+                    self._solver_warm = self._sibling_solver(
+                        'transcription_warm',
+                        ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
+                                      warm=True))
+                solver = self._solver_resolve if resolve else self._solver_warm
+                x0, lam_x, lam_g = warm_point
+                sol = solver(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx,
+                             lbg=lbg, ubg=ubg, lam_x0=lam_x, lam_g0=lam_g)
+                stats = solver.stats()
                 if not stats['success']:
                     use_warm = False
             else:
@@ -712,9 +795,10 @@ class Transcription:
                 # problems of long durations (b pressed onto delta^2 almost everywhere; seen:
                 # 'Infeasible_Problem_Detected' at 59 s between solved 58 and 59.5 s); the
                 # adaptive update solves them. Built for the retry only, then released.
-                fallback = ca.nlpsol('transcription_adaptive', 'ipopt', self._nlp,
-                                     ipopt_options(self._max_iter, self._tol,
-                                                   extra={'mu_strategy': 'adaptive'}))
+                fallback = self._sibling_solver(
+                    'transcription_adaptive',
+                    ipopt_options(self._max_iter, self._tol,
+                                  extra={'mu_strategy': 'adaptive'}))
                 x0 = (self.initial_guess(req, lbx, ubx) if start is None
                       else np.clip(start, lbx, ubx))
                 sol = fallback(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
