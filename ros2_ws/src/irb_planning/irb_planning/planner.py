@@ -65,6 +65,11 @@ from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve,
 PEAK_SAMPLES_PER_INTERVAL = 64
 SHORT_INTERVAL_S = 1.5e-3
 
+#: step of jerk_path's difference formulas for third derivatives, as a share of the grid
+#: interval (second-order differences: a relative error ~1e-6 on the splines of
+#: bench_floor_certificate.py; small, so that a spline knot rarely lies within it)
+THIRD_STEP = 1e-3
+
 
 @dataclass(frozen=True)
 class PlannerSettings:
@@ -1092,28 +1097,33 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
 
 
 def jerk_path(path: PathBase, sample, theta: np.ndarray, nodes, sides) -> JerkPath:
-    """The path's derivatives for the transcription's jerk rows: at 5 points of every
-    interval (just after its start, quarter points, just before its end: on its own side of
-    a piece end) Phi, Phi', Phi'' from ``sample`` and p', p'' from the path; the third
-    derivatives by the 5-point finite-difference stencils of the second (error O(h^4)).
-    ``nodes``, ``sides``: the transcription's dynamics, for the jump of c at piece ends."""
+    """The path's derivatives for the transcription's jerk rows at 3 points of every interval
+    (just after its start, its midpoint, just before its end: on its own side of a piece
+    end): Phi, Phi', Phi'' from ``sample`` and p', p'' from the path; the third derivatives
+    by second-order differences of the second with a step of THIRD_STEP x the interval,
+    one-sided into the interval at its ends, central at the midpoint. (Issue 28: 5-point
+    stencils over the whole interval differentiated across a spline's knots, where p^(3)
+    and Phi^(3) jump: on a closed spline of bench_floor_certificate.py the normal TCP jerk
+    component of a row was 2.9 x the true one next to a knot, and the planner refused
+    motions that exist.) ``nodes``, ``sides``: the transcription's dynamics (unused)."""
     h = np.diff(theta)
     K = h.size
-    offs = np.array([1e-7, 0.25, 0.5, 0.75, 1 - 1e-7])
-    th5 = (theta[:-1, None] + h[:, None] * offs[None, :]).ravel()
-    jp = sample(th5)
+    eps = THIRD_STEP * h
+    start, mid, end = theta[:-1] + 1e-7 * h, theta[:-1] + 0.5 * h, theta[1:] - 1e-7 * h
+    # per point: the point and its two neighbours of the difference formula
+    th = np.concatenate([start, start + eps, start + 2 * eps, mid - eps, mid, mid + eps,
+                         end - 2 * eps, end - eps, end])
+    jp = sample(th)
     n = jp.q.shape[1]
-    dq, ddq = jp.dq.reshape(K, 5, n), jp.ddq.reshape(K, 5, n)
-    d1, d2 = path.d_point(th5).reshape(K, 5, 3), path.dd_point(th5).reshape(K, 5, 3)
+    dq, ddq = jp.dq.reshape(9, K, n), jp.ddq.reshape(9, K, n)
+    d1, d2 = path.d_point(th).reshape(9, K, 3), path.dd_point(th).reshape(9, K, 3)
 
     def third(f):
-        d = (h / 4)[:, None]
-        f0, f1, f2, f3, f4 = (f[:, j] for j in range(5))
-        return np.stack([(-25 * f0 + 48 * f1 - 36 * f2 + 16 * f3 - 3 * f4) / (12 * d),
-                         (f0 - 8 * f1 + 8 * f3 - f4) / (12 * d),
-                         (3 * f0 - 16 * f1 + 36 * f2 - 48 * f3 + 25 * f4) / (12 * d)])
+        e = (2 * eps)[:, None]
+        return np.stack([(-3 * f[0] + 4 * f[1] - f[2]) / e, (f[5] - f[3]) / e,
+                         (f[6] - 4 * f[7] + 3 * f[8]) / e])
 
-    pick = lambda f: np.stack([f[:, 0], f[:, 2], f[:, 4]])  # noqa: E731
+    pick = lambda f: np.stack([f[0], f[4], f[8]])  # noqa: E731
     return JerkPath(pick(dq), pick(ddq), third(ddq), pick(d1), pick(d2), third(d2))
 
 
