@@ -617,6 +617,17 @@ class Planner:
         finally:
             release_memory()       # the request's 1 kHz arrays: back to the OS, not the arena
 
+    @staticmethod
+    def refined_grid(req: PlanRequest, path: PathBase, max_grid: int) -> tuple[int, float]:
+        """(a grid for a refusal that is not proven, the path's tightest bend radius [m],
+        inf without a bend): intervals of at most a third of that radius, at least twice and
+        at most four times the nodes, at most ``max_grid``."""
+        theta = np.linspace(0.0, 2 * np.pi, 4001)
+        kmax = float(np.max(curvature(path.d_point(theta), path.dd_point(theta))))
+        need = int(np.ceil(3 * path.length * kmax)) + 1 if kmax > 0 else 0
+        grid = min(max_grid, 4 * req.grid_size, max(2 * req.grid_size, need))
+        return grid, (1.0 / kmax if kmax > 0 else float('inf'))
+
     def _plan(self, request: PlanRequest) -> PlanResult:
         s = self.settings
         req = validate(request, s.grid_size, s.max_grid_size)
@@ -849,22 +860,38 @@ class Planner:
                    band: TcpBand | None, checked: LimitSet, what: str = 'of this duration'
                    ) -> PlanError:
         """A refusal for process constraints the solver found infeasible, with the TCP jerk
-        certificate when there is one (certificate.py); ``exc`` unchanged otherwise."""
+        certificate when there is one (certificate.py). Without one the refusal says that it
+        is not proven (the strongest bound and the limit, the grid against the tightest
+        bend), so that a false refusal shows itself (issue 28); ``exc`` unchanged for other
+        refusals."""
         if (band is None or exc.code != ERROR_INFEASIBLE_DURATION
                 or not exc.message.startswith('no motion')):
             return exc
-        cert = self.jerk_certificate(req, path, checked.velocity)
-        if cert is None:
+        cert = self.jerk_certificate(req, path, checked.velocity, strict=False)
+        if cert is not None and cert.proves:
+            return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
+                             f'{band_text(band)} together with the TCP jerk limit: '
+                             f'{cert.text()}')
+        if self.smooth_limits is None or not req.tcp_speed_min > 0:
             return exc
-        return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
-                         f'{band_text(band)} together with the TCP jerk limit: {cert.text()}')
+        why = (cert.shortfall() if cert is not None else 'no certificate: the path has '
+               'curvature jumps or no bend, certificate.py has no bound for it')
+        grid, radius = self.refined_grid(req, path, self.settings.max_grid_size)
+        bend = (f'a tightest bend of radius {radius * 1e3:.1f} mm' if radius < np.inf
+                else 'no bend')
+        more = (f': a finer grid_size (e.g. {grid}) may plan it' if grid > req.grid_size
+                else '')
+        return PlanError(ERROR_INFEASIBLE_DURATION, f'{exc.message}; not proven: {why}; the '
+                         f'grid\'s intervals are {path.length / (req.grid_size - 1) * 1e3:.1f} '
+                         f'mm against {bend}{more}')
 
     def jerk_certificate(self, req: PlanRequest, path: PathBase, velocity_limit: np.ndarray,
-                         samples: int = 4000) -> JerkCertificate | None:
+                         samples: int = 4000, strict: bool = True) -> JerkCertificate | None:
         """A lower bound above the TCP jerk limit on the TCP jerk of every motion along
         ``path`` that keeps ``req``'s TCP speed floor (its ceiling and the joint speed limits
         ``velocity_limit`` bound the speed from above): certificate.py. None if none is
-        found, the limits are off, or the path has interior piece ends (curvature jumps)."""
+        found, the limits are off, or the path has interior piece ends (curvature jumps);
+        ``strict`` False: the strongest bound whatever its value."""
         sm = self.smooth_limits
         inner = np.asarray(path.breaks, float)
         if (sm is None or not req.tcp_speed_min > 0 or not sm.tcp_jerk > 0
@@ -887,7 +914,7 @@ class Planner:
             v_cap = np.minimum(v_cap, req.tcp_speed_max)
         zone = None if periodic else (req.tcp_ramp_length, L - req.tcp_ramp_length)
         return jerk_certificate(sigma, L, curvature(d1v, d2v), v_cap, req.tcp_speed_min,
-                                sm.tcp_jerk, periodic, zone)
+                                sm.tcp_jerk, periodic, zone, strict)
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the

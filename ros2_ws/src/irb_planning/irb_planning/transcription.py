@@ -70,13 +70,14 @@ theta, so the path jerk is d theta_ddot / dt = kappa_k theta_dot (kappa_k = (a_{
 h_k), and the joint jerk is exactly
     d3q/dt3 = Phi^(3) theta_dot^3 + 3 Phi'' theta_dot theta_ddot + Phi' d3theta/dt3
             = sqrt(b) (Phi^(3) b + 3 Phi'' a + Phi' kappa_k);
-the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3| <=
-J_tcp (linear rows: an octagon in the osculating plane and the binormal) at both ends and the midpoint of every interval (each node from both sides). A
-rest-to-rest problem then has a = 0 at its rest nodes and cubic rest intervals (profile.py:
-constant path jerk from rest, theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the
-torque starts and ends at the static torque. Where the path's curvature jumps (a circular
-blend's end) the joint and TCP accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b:
-no motion exactly on the path has a finite jerk there at b > 0, so the rows hold on each side
+the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3| <= J_tcp
+(linear rows: an octagon in the osculating plane and the binormal) at both ends and the
+midpoint of every interval (each node from both sides). A rest-to-rest problem then has a =
+0 at its rest nodes and cubic rest intervals (profile.py: constant path jerk from rest,
+theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the torque starts and ends at the
+static torque. Where the path's curvature jumps (a circular blend's end) the joint and TCP
+accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b: no motion exactly on the
+path has a finite jerk there at b > 0, so the rows hold on each side
 and the jump itself is the message's (two points 1 ms apart, planner.message_points).
 """
 from __future__ import annotations
