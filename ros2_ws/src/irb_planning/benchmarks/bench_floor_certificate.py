@@ -86,6 +86,7 @@ def main():
     ap.add_argument('--grid', type=int, default=60)
     ap.add_argument('--witness-samples', type=int, default=1500)
     ap.add_argument('--cases', type=int, nargs='*', default=None, help='only these cases')
+    ap.add_argument('--name', default='floor_certificate', help='results/<name>.json')
     a = ap.parse_args()
     on = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2, limit_cost=False))
     off = Planner(settings=PlannerSettings(grid_size=a.grid, cache_size=2, jerk_limits=False))
@@ -148,7 +149,7 @@ def main():
                                                            'certificate')}
                             for k in ('on', 'off')}), file=sys.stderr, flush=True)
     limit = on.smooth_limits.tcp_jerk
-    dump('floor_certificate', {
+    dump(a.name, {
         'command': ' '.join(['bench_floor_certificate.py'] + sys.argv[1:]),
         'v_min_m_s': V_MIN, 'tcp_jerk_limit_m_s3': limit,
         'planned_with_limits': sum(r['on']['planned'] for r in rows),
