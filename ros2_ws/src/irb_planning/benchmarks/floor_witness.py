@@ -61,8 +61,9 @@ def geometry(model, waypoints: np.ndarray, n: int) -> dict:
 
 
 def witness(model, geo: dict, v_min: float, v_max: float, a_max: float,
-            joint_jerk: np.ndarray, v_floor_margin: float = 1.0) -> dict:
-    """The speed profile of least peak |TCP jerk| found (see module docstring)."""
+            joint_jerk: np.ndarray, v_floor_margin: float = 1.0, max_iter: int = 600) -> dict:
+    """The speed profile of least peak |TCP jerk| found (see module docstring); IPOPT stops
+    after ``max_iter`` iterations (then ``solved`` is False: no witness)."""
     import casadi as ca
     s, k, ks, tau = geo['s'], geo['kappa'], geo['kappa_s'], geo['torsion']
     q_s, q_ss, q_sss = geo['q_s'], geo['q_ss'], geo['q_sss']
@@ -89,7 +90,7 @@ def witness(model, geo: dict, v_min: float, v_max: float, a_max: float,
     opti.set_initial(w, 0.0)
     opti.set_initial(peak, 1e3)
     opti.solver('ipopt', {'print_time': False},
-                {'print_level': 0, 'max_iter': 3000, 'tol': 1e-8, 'sb': 'yes'})
+                {'print_level': 0, 'max_iter': max_iter, 'tol': 1e-8, 'sb': 'yes'})
     try:
         sol = opti.solve()
         ok = True
