@@ -48,6 +48,17 @@ class JerkCertificate:
     def ratio(self) -> float:
         return self.need / self.limit
 
+    @property
+    def proves(self) -> bool:
+        """The bound exceeds the limit: no motion in the band keeps the limit."""
+        return self.need > self.limit
+
+    def shortfall(self) -> str:
+        """Why a bound at or below the limit proves nothing (a refusal without certificate)."""
+        return (f'no certificate: the strongest TCP jerk bound of certificate.py is '
+                f'{self.need:.4g} m/s^3 <= the limit {self.limit:.4g} m/s^3 '
+                f'(kappa v^3 from {self.from_m * 1e3:.1f} mm to {self.to_m * 1e3:.1f} mm)')
+
     def text(self) -> str:
         return (f'every motion with its TCP speed in the band has a TCP jerk of at least '
                 f'{self.need:.4g} m/s^3 > the limit {self.limit:.4g} m/s^3 (by '
@@ -66,8 +77,10 @@ def curvature(d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
 
 def jerk_certificate(sigma: np.ndarray, length: float, kappa: np.ndarray, v_cap: np.ndarray,
                      v_min: float, tcp_jerk: float, periodic: bool,
-                     zone: tuple[float, float] | None = None) -> JerkCertificate | None:
-    """The strongest bound (None: none above ``tcp_jerk``, or no TCP jerk limit).
+                     zone: tuple[float, float] | None = None, strict: bool = True
+                     ) -> JerkCertificate | None:
+    """The strongest bound (None: none above ``tcp_jerk`` (``strict``; else the strongest
+    one whatever its value, None only without a positive one), or no TCP jerk limit).
 
     sigma (M,) arc length [m] of fine path samples (increasing from 0), ``length`` [m] the
     path's (a closed path's loop closes from the last sample back to the first); kappa (M,)
@@ -92,7 +105,7 @@ def jerk_certificate(sigma: np.ndarray, length: float, kappa: np.ndarray, v_cap:
         k, i = np.unravel_index(int(np.argmax(need)), need.shape)
         if need[k, i] > best:
             best, k_best, i_best = float(need[k, i]), int(rows[k]), int(i)
-    if not best > tcp_jerk:
+    if not best > (tcp_jerk if strict else 0.0):
         return None
     j, i = k_best, i_best
     return JerkCertificate(best, float(tcp_jerk), float(sigma[i]),

@@ -65,6 +65,11 @@ from .verify import (LIMIT_RTOL, ArmKinematics, Circle, MapFriction, PathCurve,
 PEAK_SAMPLES_PER_INTERVAL = 64
 SHORT_INTERVAL_S = 1.5e-3
 
+#: step of jerk_path's difference formulas for third derivatives, as a share of the grid
+#: interval (second-order differences: a relative error ~1e-6 on the splines of
+#: bench_floor_certificate.py; small, so that a spline knot rarely lies within it)
+THIRD_STEP = 1e-3
+
 
 @dataclass(frozen=True)
 class PlannerSettings:
@@ -613,6 +618,17 @@ class Planner:
         finally:
             release_memory()       # the request's 1 kHz arrays: back to the OS, not the arena
 
+    @staticmethod
+    def refined_grid(req: PlanRequest, path: PathBase, max_grid: int) -> tuple[int, float]:
+        """(a grid for a refusal that is not proven, the path's tightest bend radius [m],
+        inf without a bend): intervals of at most a third of that radius, at least twice and
+        at most four times the nodes, at most ``max_grid``."""
+        theta = np.linspace(0.0, 2 * np.pi, 4001)
+        kmax = float(np.max(curvature(path.d_point(theta), path.dd_point(theta))))
+        need = int(np.ceil(3 * path.length * kmax)) + 1 if kmax > 0 else 0
+        grid = min(max_grid, 4 * req.grid_size, max(2 * req.grid_size, need))
+        return grid, (1.0 / kmax if kmax > 0 else float('inf'))
+
     def _plan(self, request: PlanRequest) -> PlanResult:
         s = self.settings
         req = validate(request, s.grid_size, s.max_grid_size)
@@ -845,22 +861,38 @@ class Planner:
                    band: TcpBand | None, checked: LimitSet, what: str = 'of this duration'
                    ) -> PlanError:
         """A refusal for process constraints the solver found infeasible, with the TCP jerk
-        certificate when there is one (certificate.py); ``exc`` unchanged otherwise."""
+        certificate when there is one (certificate.py). Without one the refusal says that it
+        is not proven (the strongest bound and the limit, the grid against the tightest
+        bend), so that a false refusal shows itself (issue 28); ``exc`` unchanged for other
+        refusals."""
         if (band is None or exc.code != ERROR_INFEASIBLE_DURATION
                 or not exc.message.startswith('no motion')):
             return exc
-        cert = self.jerk_certificate(req, path, checked.velocity)
-        if cert is None:
+        cert = self.jerk_certificate(req, path, checked.velocity, strict=False)
+        if cert is not None and cert.proves:
+            return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
+                             f'{band_text(band)} together with the TCP jerk limit: '
+                             f'{cert.text()}')
+        if self.smooth_limits is None or not req.tcp_speed_min > 0:
             return exc
-        return PlanError(ERROR_INFEASIBLE_DURATION, f'no motion {what} keeps the '
-                         f'{band_text(band)} together with the TCP jerk limit: {cert.text()}')
+        why = (cert.shortfall() if cert is not None else 'no certificate: the path has '
+               'curvature jumps or no bend, certificate.py has no bound for it')
+        grid, radius = self.refined_grid(req, path, self.settings.max_grid_size)
+        bend = (f'a tightest bend of radius {radius * 1e3:.1f} mm' if radius < np.inf
+                else 'no bend')
+        more = (f': a finer grid_size (e.g. {grid}) may plan it' if grid > req.grid_size
+                else '')
+        return PlanError(ERROR_INFEASIBLE_DURATION, f'{exc.message}; not proven: {why}; the '
+                         f'grid\'s intervals are {path.length / (req.grid_size - 1) * 1e3:.1f} '
+                         f'mm against {bend}{more}')
 
     def jerk_certificate(self, req: PlanRequest, path: PathBase, velocity_limit: np.ndarray,
-                         samples: int = 4000) -> JerkCertificate | None:
+                         samples: int = 4000, strict: bool = True) -> JerkCertificate | None:
         """A lower bound above the TCP jerk limit on the TCP jerk of every motion along
         ``path`` that keeps ``req``'s TCP speed floor (its ceiling and the joint speed limits
         ``velocity_limit`` bound the speed from above): certificate.py. None if none is
-        found, the limits are off, or the path has interior piece ends (curvature jumps)."""
+        found, the limits are off, or the path has interior piece ends (curvature jumps);
+        ``strict`` False: the strongest bound whatever its value."""
         sm = self.smooth_limits
         inner = np.asarray(path.breaks, float)
         if (sm is None or not req.tcp_speed_min > 0 or not sm.tcp_jerk > 0
@@ -883,7 +915,7 @@ class Planner:
             v_cap = np.minimum(v_cap, req.tcp_speed_max)
         zone = None if periodic else (req.tcp_ramp_length, L - req.tcp_ramp_length)
         return jerk_certificate(sigma, L, curvature(d1v, d2v), v_cap, req.tcp_speed_min,
-                                sm.tcp_jerk, periodic, zone)
+                                sm.tcp_jerk, periodic, zone, strict)
 
     def evaluate(self, result: PlanResult, rate_hz: float) -> Evaluation:
         """``result``'s profile resampled by the evaluator at ``rate_hz`` [Hz], with the
@@ -1110,28 +1142,33 @@ def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,
 
 
 def jerk_path(path: PathBase, sample, theta: np.ndarray, nodes, sides) -> JerkPath:
-    """The path's derivatives for the transcription's jerk rows: at 5 points of every
-    interval (just after its start, quarter points, just before its end: on its own side of
-    a piece end) Phi, Phi', Phi'' from ``sample`` and p', p'' from the path; the third
-    derivatives by the 5-point finite-difference stencils of the second (error O(h^4)).
-    ``nodes``, ``sides``: the transcription's dynamics, for the jump of c at piece ends."""
+    """The path's derivatives for the transcription's jerk rows at 3 points of every interval
+    (just after its start, its midpoint, just before its end: on its own side of a piece
+    end): Phi, Phi', Phi'' from ``sample`` and p', p'' from the path; the third derivatives
+    by second-order differences of the second with a step of THIRD_STEP x the interval,
+    one-sided into the interval at its ends, central at the midpoint. (Issue 28: 5-point
+    stencils over the whole interval differentiated across a spline's knots, where p^(3)
+    and Phi^(3) jump: on a closed spline of bench_floor_certificate.py the normal TCP jerk
+    component of a row was 2.9 x the true one next to a knot, and the planner refused
+    motions that exist.) ``nodes``, ``sides``: the transcription's dynamics (unused)."""
     h = np.diff(theta)
     K = h.size
-    offs = np.array([1e-7, 0.25, 0.5, 0.75, 1 - 1e-7])
-    th5 = (theta[:-1, None] + h[:, None] * offs[None, :]).ravel()
-    jp = sample(th5)
+    eps = THIRD_STEP * h
+    start, mid, end = theta[:-1] + 1e-7 * h, theta[:-1] + 0.5 * h, theta[1:] - 1e-7 * h
+    # per point: the point and its two neighbours of the difference formula
+    th = np.concatenate([start, start + eps, start + 2 * eps, mid - eps, mid, mid + eps,
+                         end - 2 * eps, end - eps, end])
+    jp = sample(th)
     n = jp.q.shape[1]
-    dq, ddq = jp.dq.reshape(K, 5, n), jp.ddq.reshape(K, 5, n)
-    d1, d2 = path.d_point(th5).reshape(K, 5, 3), path.dd_point(th5).reshape(K, 5, 3)
+    dq, ddq = jp.dq.reshape(9, K, n), jp.ddq.reshape(9, K, n)
+    d1, d2 = path.d_point(th).reshape(9, K, 3), path.dd_point(th).reshape(9, K, 3)
 
     def third(f):
-        d = (h / 4)[:, None]
-        f0, f1, f2, f3, f4 = (f[:, j] for j in range(5))
-        return np.stack([(-25 * f0 + 48 * f1 - 36 * f2 + 16 * f3 - 3 * f4) / (12 * d),
-                         (f0 - 8 * f1 + 8 * f3 - f4) / (12 * d),
-                         (3 * f0 - 16 * f1 + 36 * f2 - 48 * f3 + 25 * f4) / (12 * d)])
+        e = (2 * eps)[:, None]
+        return np.stack([(-3 * f[0] + 4 * f[1] - f[2]) / e, (f[5] - f[3]) / e,
+                         (f[6] - 4 * f[7] + 3 * f[8]) / e])
 
-    pick = lambda f: np.stack([f[:, 0], f[:, 2], f[:, 4]])  # noqa: E731
+    pick = lambda f: np.stack([f[0], f[4], f[8]])  # noqa: E731
     return JerkPath(pick(dq), pick(ddq), third(ddq), pick(d1), pick(d2), third(d2))
 
 

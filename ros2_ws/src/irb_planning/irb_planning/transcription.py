@@ -70,13 +70,14 @@ theta, so the path jerk is d theta_ddot / dt = kappa_k theta_dot (kappa_k = (a_{
 h_k), and the joint jerk is exactly
     d3q/dt3 = Phi^(3) theta_dot^3 + 3 Phi'' theta_dot theta_ddot + Phi' d3theta/dt3
             = sqrt(b) (Phi^(3) b + 3 Phi'' a + Phi' kappa_k);
-the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3|^2 <=
-J_tcp^2 at both ends and the midpoint of every interval (each node from both sides). A
-rest-to-rest problem then has a = 0 at its rest nodes and cubic rest intervals (profile.py:
-constant path jerk from rest, theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the
-torque starts and ends at the static torque. Where the path's curvature jumps (a circular
-blend's end) the joint and TCP accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b:
-no motion exactly on the path has a finite jerk there at b > 0, so the rows hold on each side
+the TCP jerk likewise with p', p'', p^(3). Rows |d3q_i/dt3| <= J_i and |d3p/dt3| <= J_tcp
+(linear rows: an octagon in the osculating plane and the binormal) at both ends and the
+midpoint of every interval (each node from both sides). A rest-to-rest problem then has a =
+0 at its rest nodes and cubic rest intervals (profile.py: constant path jerk from rest,
+theta ~ t^3, b_1 = 1.5 a_1 h, time 3 h / sqrt(b_1)): the torque starts and ends at the
+static torque. Where the path's curvature jumps (a circular blend's end) the joint and TCP
+accelerations jump by (Phi''+ - Phi''-) b and (p''+ - p''-) b: no motion exactly on the
+path has a finite jerk there at b > 0, so the rows hold on each side
 and the jump itself is the message's (two points 1 ms apart, planner.message_points).
 """
 from __future__ import annotations
@@ -382,6 +383,7 @@ class Transcription:
             g_rows += [acc_rows]
             self._n_acc = acc_rows.numel()
         self._n_jerk = self._n_tcp_jerk = 0
+        self._binormal = []       # |p^(3)| along the binormal at the jerk rows' points
         if jerk is not None:
             kap = (a[1:] - a[:-1]) / D
             b3 = [b[:-1], b_mid, b[1:]]
@@ -399,16 +401,24 @@ class Transcription:
                 qj.append(ca.vec(ca.DM(jerk.dddq[m].T) * bb * sq
                                  + 3 * ca.DM(jerk.ddq[m].T) * sq * aa
                                  + ca.DM(jerk.dq[m].T) * tt))
-                # TCP: components in the path frame (tangent, normal, binormal), each
-                # within J_tcp / sqrt(3) (so the norm is within J_tcp); a row for |.|^2 made
-                # IPOPT take > 10x the iterations
+                # TCP: components in the path frame (tangent T, normal N, binormal B); a
+                # row for |.|^2 made IPOPT take > 10x the iterations. Rows T, N, (T + N) /
+                # sqrt 2, (T - N) / sqrt 2 (an octagon in the osculating plane) and B, bounds
+                # in _bounds: the norm stays within J_tcp. (Each component within
+                # J_tcp / sqrt 3 refused closed splines whose motions within J_tcp exist,
+                # issue 28: bench_floor_certificate.py.)
                 A, B, C = _frame_components(jerk.d1[m], jerk.d2[m], jerk.d3[m])
                 rep3 = lambda row: ca.repmat(ca.reshape(row, 1, -1), 3, 1)  # noqa: E731
-                pj.append(ca.vec(ca.DM(A.T) * rep3(b3[m]) * rep3(sq3[m])
-                                 + 3 * ca.DM(B.T) * rep3(sq3[m]) * rep3(a3[m])
-                                 + ca.DM(C.T) * rep3(tj[m])))
+                fr = (ca.DM(A.T) * rep3(b3[m]) * rep3(sq3[m])
+                      + 3 * ca.DM(B.T) * rep3(sq3[m]) * rep3(a3[m])
+                      + ca.DM(C.T) * rep3(tj[m]))
+                r2 = 1 / np.sqrt(2)
+                pj.append(ca.vec(ca.vertcat(fr[0, :], fr[1, :], r2 * (fr[0, :] + fr[1, :]),
+                                            r2 * (fr[0, :] - fr[1, :]), fr[2, :])))
+                # the binormal component is p^(3)_B b^(3/2) (p'' and p' have none)
+                self._binormal.append(np.abs(A[:, 2]))
             g_rows += [ca.vertcat(*qj), ca.vertcat(*pj)]
-            self._n_jerk, self._n_tcp_jerk = 3 * K * n, 9 * K
+            self._n_jerk, self._n_tcp_jerk = 3 * K * n, 15 * K
         g = ca.vertcat(*g_rows)
         self._rows = np.cumsum([0] + [r.numel() for r in g_rows])
 
@@ -506,12 +516,35 @@ class Transcription:
             jl = (np.full(self.n, np.inf) if req.jerk_limit is None
                   else np.asarray(req.jerk_limit, float))
             jl = np.tile(jl, 3 * K)
-            pl = req.tcp_jerk_max / np.sqrt(3) if req.tcp_jerk_max > 0 else np.inf
-            lbg += [-jl, np.full(self._n_tcp_jerk, -pl)]
-            ubg += [jl, np.full(self._n_tcp_jerk, pl)]
+            pl = np.tile(self._tcp_jerk_bounds(req, ubx[:self._nb], beta_m), 3 * K)
+            lbg += [-jl, -pl]
+            ubg += [jl, pl]
         elif req.jerk_limit is not None or req.tcp_jerk_max > 0:
             raise ValueError('jerk limits need a problem built with jerk rows')
         return lbx, ubx, np.concatenate(lbg), np.concatenate(ubg)
+
+    def _tcp_jerk_bounds(self, req: SolveRequest, ub_b: np.ndarray, ub_mid: np.ndarray
+                         ) -> np.ndarray:
+        """Bounds (5,) of the TCP jerk rows of one point (T, N, the two diagonals, B) such
+        that |jerk| <= tcp_jerk_max: the binormal component p^(3)_B b^(3/2) depends on b
+        only, so its largest value at the caps on b (``ub_b`` of the free node values,
+        ``ub_mid`` at the midpoints) bounds it: R_B = min(that, J / sqrt 3); the octagon in
+        the osculating plane gets the apothem cos(pi / 8) sqrt(J^2 - R_B^2). A planar path
+        (B = 0) keeps 0.924 J per direction instead of J / sqrt 3 = 0.577 J per component."""
+        J = req.tcp_jerk_max
+        if not J > 0:
+            return np.full(5, np.inf)
+        if self.boundary == BOUNDARY_REST:
+            ub = np.concatenate([[0.0], ub_b, [0.0]])
+        else:
+            ub = np.append(ub_b, ub_b[0])
+        caps = [ub[:-1], ub_mid, ub[1:]]
+        with np.errstate(invalid='ignore'):
+            need = max(float(np.nanmax(bn * np.maximum(c, 0.0) ** 1.5))
+                       for bn, c in zip(self._binormal, caps))
+        r_b = min(need * (1 + 1e-6) + 1e-9 * J, J / np.sqrt(3))
+        r_tn = np.cos(np.pi / 8) * np.sqrt(J ** 2 - r_b ** 2)
+        return np.array([r_tn, r_tn, r_tn, r_tn, r_b])
 
     def _tcp_bounds(self, req: SolveRequest):
         """The process constraints as bounds on b: cap at the nodes (N,) and midpoints (K,)

@@ -1,0 +1,109 @@
+"""Issue 28: closed splines at a TCP speed floor that the planner refused without a
+certificate (bench_floor_certificate.py, seed 1, cases 7 and 8) have motions within every
+limit (benchmarks/floor_witness.py found them independently). The causes, each tested here:
+the jerk rows' third derivatives (5-point stencils across spline knots), the TCP jerk rows
+(each component within J / sqrt 3) and the grid (13.5 mm intervals against an 11 mm bend).
+A refusal without a certificate says it is not proven and names a finer grid."""
+import importlib.util
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from irb_planning.planner import Planner, PlannerSettings, jerk_path, request_path, theta_grid
+from irb_planning.request import (ERROR_INFEASIBLE_DURATION, PlanError, PlanRequest,
+                                  validate)
+from irb_planning.transcription import BOUNDARY_PERIODIC, Transcription
+from irb_planning.verify import LIMIT_RTOL
+
+_spec = importlib.util.spec_from_file_location('played', Path(__file__).with_name('played.py'))
+played = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(played)
+
+#: bench_floor_certificate.py --seed 1, case 8 (its request exactly)
+CASE8 = PlanRequest(path_type='spline', closed=True, boundary='periodic', objective='time',
+                    waypoints=np.array([
+                        [0.8059451642691711, 0.052813684539034705, 0.3442581396619382],
+                        [0.7770327408241988, -0.031080343868107513, 0.4286843640906753],
+                        [0.921588404281478, 0.0649037261056983, 0.6560200880097721],
+                        [0.8915213906338776, 0.07397175651253617, 0.550444882019273]]),
+                    tcp_speed_min=0.3, tcp_speed_max=1.2, tcp_accel_max=16.006857376297052,
+                    tcp_ramp_length=0.0)
+
+
+def test_jerk_rows_third_derivative_is_exact_next_to_spline_knots(planner):
+    """p^(3) of the jerk rows against a central difference of p'' with a tiny step (each
+    point away from the spline's knots by more than the step): within 1e-4 of max |p^(3)|
+    at grid 60 (the 5-point stencils over the interval were off by 22 %)."""
+    path = request_path(validate(CASE8, 60))
+    theta = theta_grid(60, path.breaks)
+    jp = jerk_path(path, planner.sample_path(path), theta, None, None)
+    h = np.diff(theta)
+    eps = 1e-6
+    for m, off in enumerate((1e-7, 0.5, 1 - 1e-7)):
+        th = theta[:-1] + off * h
+        th = th[(th > 2 * eps) & (th < 2 * np.pi - 2 * eps)]
+        ref = (path.dd_point(th + eps) - path.dd_point(th - eps)) / (2 * eps)
+        got = jp.d3[m][(theta[:-1] + off * h > 2 * eps) & (theta[:-1] + off * h
+                                                            < 2 * np.pi - 2 * eps)]
+        # a knot within eps of a point: its two sides differ; none here
+        assert np.abs(got - ref).max() <= 1e-4 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize('binormal', [0.0, 1.0, 1e3])
+def test_tcp_jerk_rows_keep_the_norm_within_the_limit(binormal):
+    """Every jerk vector that meets the rows (octagon T, N, (T +- N) / sqrt 2 and B) has
+    |jerk| <= J: the octagon's corners lie at its apothem / cos(pi / 8); a planar path
+    (B = 0) gets 0.924 J per direction, more than the J / sqrt 3 per component before."""
+    K, J = 4, 100.0
+    fake = SimpleNamespace(boundary=BOUNDARY_PERIODIC,
+                           _binormal=[np.full(K, binormal)] * 3)
+    req = SimpleNamespace(tcp_jerk_max=J)
+    r = Transcription._tcp_jerk_bounds(fake, req, np.full(K, 0.5), np.full(K, 0.5))
+    r_tn, r_b = r[0], r[4]
+    assert np.all(r[:4] == r_tn)
+    assert np.hypot(r_tn / np.cos(np.pi / 8), r_b) <= J * (1 + 1e-12)
+    # the binormal bound covers the largest binormal component at the caps (or J / sqrt 3)
+    assert r_b >= min(binormal * 0.5 ** 1.5, J / np.sqrt(3))
+    if binormal == 0.0:
+        assert r_tn == pytest.approx(np.cos(np.pi / 8) * J, rel=1e-6)
+    # brute force: the largest norm over the octagon's corners and the binormal bound
+    phi = np.pi / 8 + np.arange(8) * np.pi / 4
+    corners = r_tn / np.cos(np.pi / 8) * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    t, n = corners.T
+    assert np.all(np.abs(np.stack([t, n, (t + n) / np.sqrt(2), (t - n) / np.sqrt(2)]))
+                  <= r_tn * (1 + 1e-12))
+    assert np.sqrt((corners ** 2).sum(axis=1) + r_b ** 2).max() <= J * (1 + 1e-12)
+
+
+def test_refusal_without_certificate_says_it_is_not_proven(planner):
+    """Case 8 at grid 60 (13.5 mm intervals against an 11.2 mm bend): the optimiser finds no
+    motion, certificate.py's strongest bound (29.5 m/s^3) is below the limit, so the refusal
+    says it is not proven, with the bound, the limit and a finer grid."""
+    with pytest.raises(PlanError) as err:
+        planner.plan(CASE8)
+    msg = err.value.message
+    assert err.value.code == ERROR_INFEASIBLE_DURATION
+    assert 'not proven: no certificate: the strongest TCP jerk bound of certificate.py is '\
+        '29.52 m/s^3 <= the limit 100 m/s^3' in msg
+    assert 'intervals are 13.5 mm against a tightest bend of radius 11.2 mm' in msg
+    assert 'a finer grid_size (e.g. 214) may plan it' in msg
+
+
+def test_case_refused_before_plans_within_the_limits_as_played(model):
+    """Case 8 at grid 200 (refused before at every grid: the stencils and the TCP jerk box):
+    planned; its TCP jerk as played by quintic interpolation at 10 kHz (test/played.py,
+    forward kinematics, third difference) within the limit, its speed within the band."""
+    pl = Planner(model.copy(), PlannerSettings(grid_size=200, cache_size=1, limit_cost=False))
+    res = pl.plan(CASE8)
+    tr = res.trajectory
+    rate = 10000.0
+    p = played.play(model, tr['t'], tr['q'], tr['qd'], tr['qdd'], rate=rate, stride=10 ** 9)
+    ticks = (p.t - p.t[0]) * rate
+    on = np.abs(ticks - np.round(ticks)) < 1e-6
+    x = np.array([model.fk(q) for q in p.q[on]])
+    jerk = np.linalg.norm(np.diff(x, n=3, axis=0), axis=1) * rate ** 3
+    speed = np.linalg.norm(np.diff(x, axis=0), axis=1) * rate
+    assert jerk.max() <= 100.0 * (1 + LIMIT_RTOL)
+    assert speed.min() >= 0.3 * (1 - 1e-3) and speed.max() <= 1.2 * (1 + 1e-3)
