@@ -6,7 +6,7 @@ the ``identifier`` listening to the live /joint_states (``joints``: that joint, 
 samples, ``complete_from`` nominal); ~/compute at the end. Compares with the plant's friction
 (irb_control config/plant.yaml).
 
-    python ros2_ws/src/irb_identification/benchmarks/bench_live_six_joint.py \
+    python ros2_ws/src/irb_bringup/benchmarks/bench_live_six_joint.py \
         [--joint joint_6] [--speeds 0.1 0.3 0.6 1.0] [--hold 1.0]
 
 Prints JSON and writes benchmarks/results/live_six_joint_<joint>.json. Not a test: about a
