@@ -28,6 +28,12 @@ import time
 COMMANDS = ('status', 'enable', 'stop', 'reset', 'hold', 'wait')
 #: the graph is taken as discovered once pdplus's services are unchanged this long [s]
 SETTLE_S = 1.0
+#: [s] how long status waits, once every topic is matched on its side, for the last sample of
+#: a latched topic that has a publisher: discovery matches the two sides separately, and a
+#: reader can be matched seconds before the writer sends it anything (measured: the
+#: simulator's axis_status reached a new reader 1.1-2.2 s or 3.7 s after it started, the
+#: latter one DDS heartbeat period later; a 1 s wait printed a status without the drive)
+LATCHED_WAIT_S = 5.0
 
 
 def parse_args(argv):
@@ -196,14 +202,14 @@ def status(a, ros_args) -> int:
         def latched_in():
             """Every latched topic that has a publisher has delivered its last message
             (matching alone does not mean the transient-local sample has arrived yet), or
-            SETTLE_S has passed since everything matched: a publisher that has published
+            LATCHED_WAIT_S has passed since everything matched: a publisher that has published
             nothing yet (pdplus before its first plan) delivers nothing to wait for."""
             if all(key in last or s.node.count_publishers(topic) == 0
                    for key, topic in latched.items()):
                 return True
             if not matched_at:
                 matched_at.append(time.monotonic())
-            return time.monotonic() - matched_at[0] >= SETTLE_S
+            return time.monotonic() - matched_at[0] >= min(LATCHED_WAIT_S, a.timeout)
         seen, services, drives = _discover(
             s, a.pdplus, a.timeout,
             lambda found, settled: (_ready('status')(found, settled) and matched()
