@@ -7,6 +7,7 @@ import os
 import signal
 import socket
 import subprocess
+import tempfile
 import time
 import uuid
 
@@ -45,7 +46,21 @@ def stop(proc):
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-    return proc.stdout.read() if proc.stdout else ''
+    log = getattr(proc, 'log', None)
+    if log is None:
+        return proc.stdout.read() if proc.stdout else ''
+    log.seek(0)
+    return log.read()
+
+
+def popen_logged(cmd, **kw):
+    """Popen with the child's output in a file (``proc.log``, read by ``stop``): a pipe read
+    only at the end fills (64 KiB) and the node then blocks in its logger, control loop and
+    all."""
+    log = tempfile.TemporaryFile(mode='w+')
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, **kw)
+    proc.log = log
+    return proc
 
 
 class Graph:
@@ -72,9 +87,7 @@ class Graph:
         cmd = ['ros2', 'run', 'irb_control', exe, '--ros-args', '-r', f'__ns:={self.ns}',
                '-p', f'state_port:={self.state_port}', '-p', f'command_port:={self.command_port}',
                *[x for p in params for x in ('-p', p)]]
-        self.procs[name] = subprocess.Popen(cmd, stdout=subprocess.PIPE,
-                                            stderr=subprocess.STDOUT, text=True,
-                                            start_new_session=True)
+        self.procs[name] = popen_logged(cmd, start_new_session=True)
 
     def wait(self, condition, timeout_s=60.0):
         """Spin until condition() holds or ``timeout_s`` of wall time have passed."""
@@ -145,11 +158,10 @@ def _data_path(graph, retries):
     # that gate about one start in twenty ended in a correct, latched safe stop: a 17 ms gap while
     # DDS discovery was still going on (watchdog), or commands nobody received yet (the axis
     # computer braked).
-    graph.procs['pdplus'] = subprocess.Popen(
+    graph.procs['pdplus'] = popen_logged(
         ['ros2', 'run', 'irb_control', 'pdplus', '--ros-args', '-r', f'__ns:={graph.ns}',
          '-p', 'profile_duration_s:=10.0', '-p', 'watchdog_missed_samples:=25',
-         '-p', 'auto_enable:=true'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+         '-p', 'auto_enable:=true'], start_new_session=True)
     states = []
     graph.node.create_subscription(ControllerState, f'{graph.ns}/controller_state',
                                    states.append, state_qos())

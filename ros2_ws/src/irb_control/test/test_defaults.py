@@ -5,6 +5,7 @@ built-in circle, started with ~/enable (nothing moves unless enabled), runs with
 1.3 on 2 cores)."""
 import os
 import subprocess
+import tempfile
 import time
 import uuid
 
@@ -24,9 +25,14 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 def test_default_simulator_and_pdplus_run_without_a_stop():
     ns = f'/df{uuid.uuid4().hex[:8]}'
     common = ['--ros-args', '-r', f'__ns:={ns}']
+    # the children's output goes to files: a pipe read only at the end fills (64 KiB) with
+    # pdplus's one log line per refused ~/enable below, and pdplus then blocks in its logger,
+    # its executor with it (the fresh-clone CI of 52d7f4b: "no axis status yet" for 120 s)
+    logs = [tempfile.TemporaryFile(mode='w+') for _ in range(2)]
     procs = [subprocess.Popen(['ros2', 'run', 'irb_control', exe, *common],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                              start_new_session=True) for exe in ('simulator', 'pdplus')]
+                              stdout=log, stderr=subprocess.STDOUT, text=True,
+                              start_new_session=True)
+             for exe, log in zip(('simulator', 'pdplus'), logs)]
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
     node = rclpy.create_node(f'defaults_{uuid.uuid4().hex[:6]}', context=ctx)
@@ -72,8 +78,9 @@ def test_default_simulator_and_pdplus_run_without_a_stop():
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         stop_sessions(procs, 30.0)
-    sim_out = procs[0].stdout.read()
-    pd_out = procs[1].stdout.read()
+    for log in logs:
+        log.seek(0)
+    sim_out, pd_out = (log.read() for log in logs)
     lines = [x for x in sim_out.splitlines() if 'mode auto: no real-time priority' in x]
     assert len(lines) == 1 and 'paced at 1x wall clock' in lines[0], sim_out
     assert 'pdplus now uses /clock' in pd_out, pd_out
