@@ -39,6 +39,23 @@ class Limits:
 RNEA_CHUNK_ROWS = 2048
 
 
+def batched_rnea(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """RNEA of the pinocchio ``model`` for every row of (M, nv) arrays -> (M, nv) [N m]:
+    ``rneaInParallel`` on one thread (a model pool copied at the call), in chunks of
+    RNEA_CHUNK_ROWS (the call holds the interpreter lock; other threads get it back between
+    chunks)."""
+    q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
+    nv = model.nv
+    out = np.empty((q.shape[0], nv))
+    pool = pin.ModelPool(model, 1)
+    for a in range(0, q.shape[0], RNEA_CHUNK_ROWS):
+        b = a + RNEA_CHUNK_ROWS
+        tau = pin.rneaInParallel(1, pool, *(np.asfortranarray(x[a:b].T)
+                                            for x in (q, qd, qdd)))
+        out[a:b] = np.asarray(tau).reshape(nv, -1).T
+    return out
+
+
 class RobotModel:
     """Simplified IRB 1600 (3 actuated joints) with full six-joint kinematics available."""
 
@@ -226,16 +243,7 @@ class RobotModel:
         from this model at the call), about 4 times faster than a Python loop over rows. In
         chunks of RNEA_CHUNK_ROWS (a few milliseconds each): the call holds the interpreter
         lock, and a node's other threads get it back between chunks."""
-        q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
-        nv = self.model.nv
-        out = np.empty((q.shape[0], nv))
-        pool = pin.ModelPool(self.model, 1)
-        for a in range(0, q.shape[0], RNEA_CHUNK_ROWS):
-            b = a + RNEA_CHUNK_ROWS
-            tau = pin.rneaInParallel(1, pool, *(np.asfortranarray(x[a:b].T)
-                                                for x in (q, qd, qdd)))
-            out[a:b] = np.asarray(tau).reshape(nv, -1).T
-        return out
+        return batched_rnea(self.model, q, qd, qdd)
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """qdd (3,) [rad/s^2] = M^-1 (tau - C qd - g) by ABA, tau without friction."""

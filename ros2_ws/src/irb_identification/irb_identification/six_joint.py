@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from irb_description.model import RNEA_CHUNK_ROWS
+from irb_description.model import batched_rnea
 from irb_description.robot_state import locked_joint_names
 from irb_description.six_axis_model import SixJointModel
 
@@ -69,16 +69,7 @@ class SixJointIdentificationModel(SixJointModel):
 
     def inverse_dynamics_batch(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
                                ) -> np.ndarray:
-        q, qd, qdd = (np.atleast_2d(np.asarray(x, float)) for x in (q, qd, qdd))
-        nv = self.model.nv
-        out = np.empty((q.shape[0], nv))
-        pool = pin.ModelPool(self.model, 1)
-        for a in range(0, q.shape[0], RNEA_CHUNK_ROWS):
-            b = a + RNEA_CHUNK_ROWS
-            tau = pin.rneaInParallel(1, pool, *(np.asfortranarray(x[a:b].T)
-                                                for x in (q, qd, qdd)))
-            out[a:b] = np.asarray(tau).reshape(nv, -1).T
-        return out
+        return batched_rnea(self.model, q, qd, qdd)
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q) (6, 6) [kg m^2], armature included."""

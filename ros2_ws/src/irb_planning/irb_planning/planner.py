@@ -849,13 +849,7 @@ class Planner:
         """(B, 2) [s]: the message intervals between the twin points around each interior
         piece end (where a circular blend's curvature jumps), which the smoothness check
         reports apart (None: no piece ends)."""
-        inner = np.asarray(path.breaks, float)
-        inner = inner[(inner > 0) & (inner < 2 * np.pi)]
-        if inner.size == 0:
-            return None
-        t_b = profile.theta_at(inner)[0]
-        half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
-        return np.column_stack([t_b - half, t_b + half])
+        return blend_windows(profile, path.breaks, self.settings.min_point_spacing_s)
 
     def _certified(self, exc: PlanError, req: PlanRequest, path: PathBase,
                    band: TcpBand | None, checked: LimitSet, what: str = 'of this duration'
@@ -1098,6 +1092,19 @@ def tighten_smooth(sm: SmoothLimits | None, sreq: SolveRequest, ver) -> dict:
     if sm.tcp_jerk > 0 and ver.tcp_jerk_peak > sm.tcp_jerk * (1 + LIMIT_RTOL):
         fix['tcp_jerk_max'] = sreq.tcp_jerk_max * sm.tcp_jerk / ver.tcp_jerk_peak * 0.999
     return fix
+
+
+def blend_windows(profile: ThetaProfile, breaks, min_spacing: float) -> np.ndarray | None:
+    """(B, 2) [s]: the message intervals between the twin points ``message_points`` puts
+    around each interior piece end (where a blend's curvature jumps), which the smoothness
+    checks report apart (None: no interior piece ends)."""
+    inner = np.asarray(breaks, float)
+    inner = inner[(inner > 0) & (inner < 2 * np.pi)]
+    if inner.size == 0:
+        return None
+    t_b = profile.theta_at(inner)[0]
+    half = 0.5 * min_spacing * (1 + 1e-3) + 2e-9
+    return np.column_stack([t_b - half, t_b + half])
 
 
 def message_points(profile: ThetaProfile, theta: np.ndarray, breaks: np.ndarray,

@@ -55,8 +55,8 @@ from irb_description.six_axis_model import nominal_six_joint_friction
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, worst_inconsistency)
 
-from .planner import (PlannerSettings, jerk_path, message_points, theta_grid,
-                      tighten_smooth)
+from .planner import (PlannerSettings, blend_windows, jerk_path, message_points,
+                      theta_grid, tighten_smooth)
 from .problem import casadi_friction, path_dynamics
 from .profile import ThetaProfile
 from .six_axis_check import DHTable, PlayedCheck, SmoothLimits, check_played
@@ -509,14 +509,8 @@ class SixAxisPlanner:
 
     def blend_windows(self, profile: ThetaProfile, path: PathBase) -> np.ndarray | None:
         """(B, 2) [s]: the message intervals between the twin points around each interior
-        piece end (the three-axis planner's rule), reported apart by the smoothness check."""
-        inner = np.asarray(path.breaks, float)
-        inner = inner[(inner > 0) & (inner < 2 * np.pi)]
-        if inner.size == 0:
-            return None
-        t_b = profile.theta_at(inner)[0]
-        half = 0.5 * self.settings.min_point_spacing_s * (1 + 1e-3) + 2e-9
-        return np.column_stack([t_b - half, t_b + half])
+        piece end (``planner.blend_windows``), reported apart by the smoothness check."""
+        return blend_windows(profile, path.breaks, self.settings.min_point_spacing_s)
 
     def check(self, prob: SixAxisProblem, t, q, qd, qdd, torque: bool = True,
               smooth: bool = False, exempt=None) -> PlayedCheck:
