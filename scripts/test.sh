@@ -21,10 +21,10 @@ fi
 # Both always run; the exit code is the worse of the two.
 echo "[test] 1/2 tests without ROS processes (-m 'not ros', 2 workers; ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 set +e
-python -m pytest -m 'not ros' -n 2 --durations=10
+python -m pytest -m 'not ros' -n 2 --durations=15
 rc1=$?
 echo "[test] 2/2 ROS tests (-m ros, one at a time)"
-python -m pytest -m ros
+python -m pytest -m ros --durations=25
 rc2=$?
 set -e
 echo "[test] tests without ROS processes: exit $rc1; ROS tests: exit $rc2"

@@ -159,10 +159,12 @@ class _Operator:
 
 
 def _drained(lines):
-    """The recorder's last two progress lines (every 0.5 s) give the same counts."""
+    """The recorder's last two progress lines (every 0.5 s) give the same counts. The topics
+    after '|' come in the order they were first seen (the CI of ed9dcb4 had /torque_command
+    first: a filter on '| /joint_states' never held)."""
     with lines.lock:
         prog = [ln.split('|', 1)[1] for ln in lines.lines
-                if ln.startswith('[recorder]') and '| /joint_states' in ln]
+                if ln.startswith('[recorder]') and '/joint_states' in ln.partition('|')[2]]
     return len(prog) >= 2 and prog[-1] == prog[-2]
 
 

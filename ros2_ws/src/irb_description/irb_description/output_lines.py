@@ -59,3 +59,15 @@ class OutputLines:
         while (line := self._next(0)) is not None:
             out.append(line)
         return ''.join(out)
+
+
+def popen_lines(cmd, **popen_kw):
+    """``subprocess.Popen(cmd)`` with stdout and stderr merged into one text pipe that an
+    ``OutputLines`` (``proc.out``) drains from the start. A pipe read only at the end fills
+    at 64 KiB and the child then blocks in its logger, executor and all (a pdplus that logged
+    a line per refused ~/enable never took the simulator's latched state)."""
+    import subprocess
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            **popen_kw)
+    proc.out = OutputLines(proc.stdout)
+    return proc

@@ -13,16 +13,18 @@ from geometry_msgs.msg import Point  # noqa: E402
 from irb_interfaces.srv import SolveIk  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
+from irb_description.output_lines import popen_lines  # noqa: E402
+
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def server():
     name = f'/test_solve_ik_{uuid.uuid4().hex[:8]}'
-    proc = subprocess.Popen(
+    proc = popen_lines(
         ['ros2', 'run', 'irb_description', 'kinematics_server', '--ros-args',
          '-r', f'solve_ik:={name}', '-r', f'__node:=kin_{uuid.uuid4().hex[:6]}'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        start_new_session=True)
     yield name, proc
     if proc.poll() is None:
         os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
@@ -75,4 +77,4 @@ def test_solve_ik_across_processes(server, client_node, model):
     assert np.all(np.isnan(res.solutions[0].positions))
 
     os.killpg(proc.pid, signal.SIGINT)      # Ctrl-C: the whole group, once
-    assert proc.wait(timeout=30) == 0, proc.stdout.read()
+    assert proc.wait(timeout=30) == 0, proc.out.rest()

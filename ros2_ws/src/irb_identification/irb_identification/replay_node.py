@@ -32,8 +32,8 @@ SPEC = NodeSpec(
         Param('clock', False, '', 'publish /clock (rosgraph_msgs/Clock) with the bag time'),
         Param('clock_frequency_hz', 100.0, 'Hz', '/clock rate, in bag time'),
         Param('topics', [''], '', "topics to play ('' = all)"),
-        Param('wait_for_subscribers', 0, '', 'wait until every topic has this many '
-              'subscribers'),
+        Param('wait_for_subscribers', 0, '', 'wait until every topic (and /clock with '
+              'clock:=true) has this many subscribers'),
         Param('wait_timeout_s', 10.0, 's', 'limit of that wait'),
         Param('start_delay_s', 0.2, 's', 'pause before playing'),
         Param('verify', True, '', 'check the whole bag (CRCs, counts) before playing it'),
@@ -152,11 +152,14 @@ def _make_node_class():
 
         def _wait_for_subscribers(self) -> None:
             deadline = time.monotonic() + self.wait_timeout
+            # /clock counts as a topic too: a node on sim time that has not matched it yet
+            # would miss the start of the bag's time
+            pubs = dict(self.pubs, **({'/clock': self.clock_pub} if self.clock_pub else {}))
             while (self.wait_subs > 0 and time.monotonic() < deadline and not self.stop.is_set()
                    and any(p.get_subscription_count() < self.wait_subs
-                           for p in self.pubs.values())):
+                           for p in pubs.values())):
                 self.stop.wait(0.02)
-            short = {t: p.get_subscription_count() for t, p in self.pubs.items()
+            short = {t: p.get_subscription_count() for t, p in pubs.items()
                      if p.get_subscription_count() < self.wait_subs}
             if self.wait_subs > 0 and short and not self.stop.is_set():
                 self.get_logger().warning(

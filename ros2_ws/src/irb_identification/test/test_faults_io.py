@@ -16,7 +16,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from irb_description.output_lines import OutputLines  # noqa: E402
+from irb_description.output_lines import popen_lines  # noqa: E402
 from irb_identification import bagio  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -84,8 +84,7 @@ def test_recorder_process_on_a_full_disk(tiny_disk, ctx):
     cmd = [_exe('recorder'), '--ros-args', '-p', f'root:={tiny_disk}', '-p', 'name:=full',
            '-p', f'topics:=[{topic}]', '-p', 'types:=[sensor_msgs/msg/JointState]',
            '-p', 'split_period_s:=0.2', '-r', f'__node:=rec_{uuid.uuid4().hex[:6]}']
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    proc = popen_lines(cmd, start_new_session=True)
     try:
         deadline = time.monotonic() + 60
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
@@ -103,16 +102,15 @@ def test_recorder_process_on_a_full_disk(tiny_disk, ctx):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-    out = proc.stdout.read()
+    out = proc.out.rest()
     assert code == 1, out
     assert 'Traceback' not in out and out.count('No space left') >= 1, out
     assert 'recorder: bag' in out and 'kept' in out
     # a clean start afterwards in the same root (another name): its recovery of the full
     # bag does not crash or leave a .tmp file; on the still-full disk it says so in one line
     second = [x.replace('name:=full', 'name:=second') for x in cmd]
-    again = subprocess.Popen(second, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                             text=True, start_new_session=True)
-    lines = OutputLines(again.stdout)
+    again = popen_lines(second, start_new_session=True)
+    lines = again.out
     try:                                       # it ends with one line, or starts recording
         lines.wait_for('recording [', 60)
     except AssertionError:
@@ -129,10 +127,8 @@ def test_recorder_process_on_a_full_disk(tiny_disk, ctx):
 
 
 def _start(args):
-    return subprocess.Popen([_exe('replay'), '--ros-args', *args, '-r',
-                             f'__node:=rp_{uuid.uuid4().hex[:6]}'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    return popen_lines([_exe('replay'), '--ros-args', *args, '-r',
+                        f'__node:=rp_{uuid.uuid4().hex[:6]}'], start_new_session=True)
 
 
 @pytest.fixture
@@ -154,7 +150,7 @@ def test_replay_refuses_a_damaged_bag_with_one_line(small_bag):
     f.write_bytes(bytes(data))
     proc = _start(['-p', f'bag:={small_bag}', '-p', 'rate:=0.0'])
     code = proc.wait(timeout=60)
-    out = proc.stdout.read()
+    out = proc.out.rest()
     assert code == 1, out
     assert 'Traceback' not in out
     assert 'replay: bag' in out and 'damaged' in out
@@ -164,7 +160,7 @@ def test_replay_refuses_a_damaged_bag_with_one_line(small_bag):
 def test_ctrl_c_while_playing_is_quiet(small_bag, times):
     # defect 11: a traceback on every stop mid-playback
     proc = _start(['-p', f'bag:={small_bag}', '-p', 'rate:=1.0'])
-    lines = OutputLines(proc.stdout)
+    lines = proc.out
     lines.wait_for('playing', 60)
     os.killpg(proc.pid, signal.SIGINT)
     if times > 1:

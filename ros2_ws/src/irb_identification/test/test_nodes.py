@@ -18,6 +18,7 @@ from irb_identification.offline_sim import SimConfig, run_experiments  # noqa: E
 from irb_identification.recorder_node import RecorderNode  # noqa: E402
 from irb_identification.replay_node import ReplayNode  # noqa: E402
 from irb_identification.series import read_joint_series  # noqa: E402
+from irb_description.output_lines import popen_lines  # noqa: E402
 
 pytestmark = pytest.mark.ros
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
@@ -152,6 +153,10 @@ def test_record_then_replay_round_trip(ctx, tmp_path, bag_check):
         wait_for_subscribers=1, start_delay_s=0.3))
     executor.add_node(rec2)
     executor.add_node(player)
+    # both /clock readers (rec2 and this test's) matched before playing: at rate 0 the bag
+    # is over in well under a second, less than discovery takes on a loaded machine
+    assert spin_until(executor, lambda: player.clock_pub.get_subscription_count() >= 2), \
+        'the /clock readers did not match'
     import threading
     th = threading.Thread(target=player.run)
     th.start()
@@ -236,8 +241,7 @@ def test_sigkill_loses_at_most_a_tenth_of_a_second(ctx, tmp_path, bag_check, cap
     node = rclpy.create_node(f'killpub_{tag}', context=context)
     pub = node.create_publisher(JointState, topic, 100)
     executor.add_node(node)
-    proc = subprocess.Popen(_recorder_cmd(tmp_path, 'killed', topic),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = popen_lines(_recorder_cmd(tmp_path, 'killed', topic))
     try:
         assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 60), \
             'recorder did not subscribe'
