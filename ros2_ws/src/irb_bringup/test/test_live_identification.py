@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.lockstep_e2e]
 
 SPEEDS = [0.02, 0.035, 0.06, 0.1, 0.2, 0.4, 0.8, 1.2]   # [rad/s], two below v_s = 0.04
 

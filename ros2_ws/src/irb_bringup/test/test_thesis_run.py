@@ -244,6 +244,7 @@ def _bag_electrical_energy(bag, power_bag):
     return out
 
 
+@pytest.mark.lockstep_e2e
 def test_quick_pipeline_end_to_end(tmp_path):
     import numpy as np
 
