@@ -35,8 +35,10 @@ period (3 then 6, the order swapped every period) so that both see the machine a
 moments; ``--repeats`` fresh pairs for each of two motions: 'sine' (the nodes' built-in sine
 of joint 1, time-driven, 0.6 rad/s) and 'rectangle' (theta-driven: the gluing rectangle, on
 six joints with the nozzle normal to its plane, PathTracker on both), ``--seconds`` each.
-Only the steps that sent a command in a moving or holding mode count. Median, p10, p90, p99,
-min per repeat and pooled, six/three ratios, the process's CPU time. Writes
+Only the steps that sent a command count. Per step the wall time (perf_counter) and the
+thread's CPU time (thread_time_ns: without the time the scheduler gave to other processes,
+the figure of the code on a loaded machine); median, p10, p90, p99, min per repeat and
+pooled, six/three ratios. Writes
 results/<--out or six_joint_step_inprocess>.json.
 """
 import argparse
@@ -406,9 +408,11 @@ def inprocess_pair(motion: str, seconds: float) -> dict:
         p3.reset(q3)
     loops = {3: (p3, c3), 6: (p6, c6)}
     dt = {3: [], 6: []}
+    cpu = {3: [], 6: []}
     for _, c in loops.values():
         c.enable()
     perf = time.perf_counter
+    tt = time.thread_time_ns
     steps = int(seconds / p3.config.period_s)
     cpu0 = time.process_time()
     stops = {}
@@ -416,18 +420,22 @@ def inprocess_pair(motion: str, seconds: float) -> dict:
         for n in ((3, 6) if k % 2 == 0 else (6, 3)):
             plant, ctrl = loops[n]
             y = plant.measure()
+            c1 = tt()
             t1 = perf()
             o = ctrl.step(y.t, y.q, y.qd)
             t2 = perf()
+            c2 = tt()
             if o.publish:
                 dt[n].append(t2 - t1)
+                cpu[n].append(c2 - c1)
                 plant.command(o.tau)
             elif o.mode == 4:
                 stops[n] = o.stop_reason
             plant.step()
     return {'motion': motion, 'seconds': seconds, 'periods': steps,
             'cpu_s': time.process_time() - cpu0, 'stops': stops,
-            'step_ms': {n: (np.array(dt[n]) * 1e3).tolist() for n in (3, 6)}}
+            'step_ms': {n: (np.array(dt[n]) * 1e3).tolist() for n in (3, 6)},
+            'cpu_ms': {n: (np.array(cpu[n]) * 1e-6).tolist() for n in (3, 6)}}
 
 
 _SIX = {}
@@ -449,21 +457,31 @@ def main_inprocess(a) -> int:
     keys = ('min', 'p10', 'median', 'p90', 'p99')
     for motion in ('sine', 'rectangle'):
         pooled = {3: [], 6: []}
+        pooled_cpu = {3: [], 6: []}
         for r in range(a.repeats):
             res = inprocess_pair(motion, a.seconds)
-            row = {k: v for k, v in res.items() if k != 'step_ms'}
+            row = {k: v for k, v in res.items() if k not in ('step_ms', 'cpu_ms')}
             row['repeat'] = r
             row['load'] = os.getloadavg()
             for n in (3, 6):
                 pooled[n] += res['step_ms'][n]
+                pooled_cpu[n] += res['cpu_ms'][n]
                 row[f'{n}_joints'] = _istats(res['step_ms'][n])
+                row[f'{n}_joints_cpu'] = _istats(res['cpu_ms'][n])
             row['ratio_six_over_three'] = {
                 k: row['6_joints'][f'{k}_ms'] / row['3_joints'][f'{k}_ms'] for k in keys}
+            row['cpu_ratio_six_over_three'] = {
+                k: row['6_joints_cpu'][f'{k}_ms'] / row['3_joints_cpu'][f'{k}_ms']
+                for k in keys}
             print(json.dumps(row), flush=True)
             out['runs'].append(row)
         s3, s6 = _istats(pooled[3]), _istats(pooled[6])
-        out['pooled'][motion] = {'3_joints': s3, '6_joints': s6, 'ratio_six_over_three': {
-            k: s6[f'{k}_ms'] / s3[f'{k}_ms'] for k in keys}}
+        c3, c6 = _istats(pooled_cpu[3]), _istats(pooled_cpu[6])
+        out['pooled'][motion] = {
+            '3_joints': s3, '6_joints': s6,
+            'ratio_six_over_three': {k: s6[f'{k}_ms'] / s3[f'{k}_ms'] for k in keys},
+            '3_joints_cpu': c3, '6_joints_cpu': c6,
+            'cpu_ratio_six_over_three': {k: c6[f'{k}_ms'] / c3[f'{k}_ms'] for k in keys}}
     out['load_average_after'] = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     name = a.out if a.out != 'six_joint_step_nodes' else 'six_joint_step_inprocess'

@@ -492,6 +492,9 @@ class PdPlusController:
         self._pm0.gravity.linear[:] = 0.0
         self._pd0 = self._pm0.createData()
         self._zero_a = np.zeros(n)
+        # ``_model_terms_n``'s operands, filled in place each step (a slice assignment from a
+        # list costs about a third of np.array(list); pinocchio keeps no reference to them)
+        self._buf = np.zeros((4, n))
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
         self.base_path = path            # the configured path: plans that carry none
@@ -1063,15 +1066,17 @@ class PdPlusController:
         (one rounding from the matrix formulation: ~1e-14 N m, tested), plus crba for the
         diagonal the gain schedule and the stiction prediction take (~10 us less on six
         joints than the Coriolis matrix and the products)."""
-        q_p = np.array(p)
         pm, pd = self._pm, self._pd
         if self._fast:
-            tm = (pin.rnea(pm, pd, q_p, np.array([0.5 * (x + y) for x, y in zip(uu, qd_ref)]),
-                           np.array(qdd_ref))
-                  - pin.rnea(self._pm0, self._pd0, q_p,
-                             np.array([0.5 * (x - y) for x, y in zip(uu, qd_ref)]),
-                             self._zero_a)).tolist()
+            q_p, s_, d_, a_ = self._buf
+            q_p[:] = p
+            s_[:] = [0.5 * (x + y) for x, y in zip(uu, qd_ref)]
+            d_[:] = [0.5 * (x - y) for x, y in zip(uu, qd_ref)]
+            a_[:] = qdd_ref
+            tm = (pin.rnea(pm, pd, q_p, s_, a_)
+                  - pin.rnea(self._pm0, self._pd0, q_p, d_, self._zero_a)).tolist()
             return tm, pin.crba(pm, pd, q_p).diagonal().tolist()
+        q_p = np.array(p)
         # symmetric M from the upper triangle pinocchio fills (= np.triu(M) + np.triu(M, 1).T,
         # +0.0 as there; np.triu itself costs ~50 us)
         M = pin.crba(pm, pd, q_p) + 0.0
