@@ -1159,11 +1159,11 @@ class PdPlusController:
         if self._fast:      # math.exp on floats (numpy's exp per scalar costs ~0.5 us each)
             c = 2.0 * a * a
             exp = math.exp
-            alpha = [exp(-(x * x) / c) for x in qd_ref]
+            v = [(al := exp(-(x * x) / c)) * x + (1.0 - al) * y for x, y in zip(qd_ref, qd_p)]
         else:               # numpy's array exp, as ``_friction_torque``
             alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
             exp = np.exp
-        v = [al * x + (1.0 - al) * y for al, x, y in zip(alpha, qd_ref, qd_p)]
+            v = [al * x + (1.0 - al) * y for al, x, y in zip(alpha, qd_ref, qd_p)]
         par = self._friction_par
         measured = self._hump_measured or [False] * n
         if qd_hump is None:
