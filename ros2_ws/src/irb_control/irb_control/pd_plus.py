@@ -925,7 +925,9 @@ class PdPlusController:
     def _step_n(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
         """``step`` on n joints (the six-joint arm): the same operations, in the same order,
         on n-lists instead of unrolled floats (on three joints the same result to the bit as
-        ``step``, tested); every change to ``step`` belongs here too."""
+        ``step``, tested); every change to ``step`` belongs here too. On n != 3 joints the
+        model terms and the friction's exp take a cheaper formulation of the same quantities
+        (``_model_terms_n``, ``_fast``: one rounding apart, tested in the closed loop)."""
         n = self.n
         R = range(n)
         q = np.asarray(q, dtype=float)
