@@ -1050,9 +1050,11 @@ class PdPlusController:
             fl.append(tuple(qdd_ref))
         if self._stick_pred:
             pf.append(([x - y for x, y in zip(tau, tm)], qdd_ref))
+        # the eight reference/torque fields: rows of one new array (one conversion, not 8)
+        q_r, qd_r, qdd_r, e_a, de_a, tm_a, tf_a, fb_a = np.array(
+            (q_ref, qd_ref, qdd_ref, e, de, tm, tf, fb), dtype=float)
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
-                             np.array(q_ref), np.array(qd_ref), np.array(qdd_ref), np.array(e),
-                             np.array(de), np.array(tm), np.array(tf), np.array(fb))
+                             q_r, qd_r, qdd_r, e_a, de_a, tm_a, tf_a, fb_a)
 
     def _model_terms_n(self, p: list, uu: list, qd_ref: list, qdd_ref: list
                        ) -> tuple[list, list]:
@@ -1113,6 +1115,10 @@ class PdPlusController:
                 u, a = u[i], a[i]
             if abs(v) < rest:
                 v = 0.0
+                # (the first substep's test, ahead of the loop: a joint held at rest costs
+                # no substep loop)
+                if s_neg <= m * a + u - off <= s_pos:
+                    continue
             for _ in range(_SLIDE_SUBSTEPS):
                 if v == 0.0:
                     drive = m * a + u - off     # what friction must hold for the joint to rest
