@@ -27,6 +27,19 @@ built-in sine of joint 1 (time-driven, 0.01 rad: the state stays at the start po
 tracking-error limit is 1 rad and the watchdog 1000 samples, so that neither stops). The
 simulator's own cost (six joints: ~4x three) is then out of pdplus's figure. Also the round
 trip state -> command as this script sees it. Writes results/<--out>.json.
+
+``--inprocess``: ``PdPlusController.step`` alone (perf_counter around the call), no ROS: two
+offline closed loops (controller and plant of closed_loop), three joints (the thesis's model,
+``step``) and six (config/pdplus_six_axis.yaml, ``_step_n``), stepped alternately period by
+period (3 then 6, the order swapped every period) so that both see the machine at the same
+moments; ``--repeats`` fresh pairs for each of two motions: 'sine' (the nodes' built-in sine
+of joint 1, time-driven, 0.6 rad/s) and 'rectangle' (theta-driven: the gluing rectangle, on
+six joints with the nozzle normal to its plane, PathTracker on both), ``--seconds`` each.
+Only the steps that sent a command count. Per step the wall time (perf_counter) and the
+thread's CPU time (thread_time_ns: without the time the scheduler gave to other processes,
+the figure of the code on a loaded machine); median, p10, p90, p99, min per repeat and
+pooled, six/three ratios. Writes
+results/<--out or six_joint_step_inprocess>.json.
 """
 import argparse
 import json
@@ -339,6 +352,154 @@ def main_lockstep(a) -> int:
     return 0
 
 
+def inprocess_pair(motion: str, seconds: float) -> dict:
+    """``--inprocess`` (module docstring): one pair of closed loops, stepped alternately;
+    the step times [ms] of each joint count."""
+    import time
+
+    import numpy as np
+    from irb_description.model import RobotModel
+    from irb_description.orientation import joint_path6, orientation_from_spec
+    from irb_description.path import rectangle_path
+    from irb_description.six_axis import SixAxisKinematics, pose
+    from irb_description.six_axis_model import SixJointModel
+
+    from irb_control.closed_loop import build_default, build_six_joint
+    from irb_control.plant import PlantConfig
+    from irb_control.profiles import (default_circle_profile, polynomial_theta_of_time,
+                                      profile_from_theta_samples, sine_trajectory)
+    tcp = pose(np.eye(3), [0.0, 0.0, 0.10])
+    six = _SIX.setdefault('model', SixJointModel(tcp))
+    three = _SIX.setdefault('three', RobotModel.load())
+    path = rectangle_path([0.7, 0.0, 0.3], [0.3, 0.1, 1.0], 0.3, 0.2, 0.025)
+    if motion == 'rectangle':
+        if 'prof6' not in _SIX:
+            law = orientation_from_spec({'law': 'path_normal', 'normal': [0.3, 0.1, 1.0],
+                                         'x_mode': 'fixed'}, path)
+            kin = SixAxisKinematics(tcp=tcp)
+            cfg = joint_path6(kin, path, law, np.linspace(0.0, 2 * np.pi, 721)).configuration
+            t, th, thd, thdd = polynomial_theta_of_time(max(seconds - 1.0, 2.0))
+            _SIX['prof6'] = profile_from_theta_samples(
+                six, path, th, thd, thdd, t, grid=1441,
+                joints=lambda x: joint_path6(kin, path, law, x, configuration=cfg,
+                                             derivatives=True))
+            _SIX['prof3'] = default_circle_profile(three, path, max(seconds - 1.0, 2.0))
+        prof6, prof3 = _SIX['prof6'], _SIX['prof3']
+        p6, c6 = build_six_joint(prof6, path, tcp, friction_mode='file', model=six)
+        p3, c3 = build_default('file', model=three, path=path)
+        c3.set_path_profile(prof3)
+        p3.reset(prof3.q[0])
+    else:
+        q6 = np.array([0.0, 0.6, 0.2, 0.0, -0.5, 0.0])
+        q3 = np.array([0.0, 0.9, 0.25])
+        cyc = max(seconds, 1.0) * 0.6 / (2 * np.pi * 0.3)
+        tr6 = sine_trajectory(q6, 0, 0.6, cycles=cyc)
+        tr3 = sine_trajectory(q3, 0, 0.6, cycles=cyc)
+        from irb_control.closed_loop import controller_friction, six_axis_controller_config
+        from irb_control.pd_plus import PdPlusController
+        from irb_control.plant import Plant, default_plant_yaml, load_plant_friction
+        _, pf6 = load_plant_friction(default_plant_yaml(), six.joint_names)
+        p6 = Plant(six, pf6, PlantConfig(initial_q=tuple(q6)))
+        c6 = PdPlusController(six, path, six_axis_controller_config(),
+                              controller_friction(six, 'file', default_plant_yaml()))
+        c6.set_time_trajectory(tr6)
+        p3, c3 = build_default('file', model=three, path=path)
+        c3.set_time_trajectory(tr3)
+        p3.reset(q3)
+    loops = {3: (p3, c3), 6: (p6, c6)}
+    dt = {3: [], 6: []}
+    cpu = {3: [], 6: []}
+    for _, c in loops.values():
+        c.enable()
+    perf = time.perf_counter
+    tt = time.thread_time_ns
+    steps = int(seconds / p3.config.period_s)
+    cpu0 = time.process_time()
+    stops = {}
+    for k in range(steps):
+        for n in ((3, 6) if k % 2 == 0 else (6, 3)):
+            plant, ctrl = loops[n]
+            y = plant.measure()
+            c1 = tt()
+            t1 = perf()
+            o = ctrl.step(y.t, y.q, y.qd)
+            t2 = perf()
+            c2 = tt()
+            if o.publish:
+                dt[n].append(t2 - t1)
+                cpu[n].append(c2 - c1)
+                plant.command(o.tau)
+            elif o.mode == 4:
+                stops[n] = o.stop_reason
+            plant.step()
+    return {'motion': motion, 'seconds': seconds, 'periods': steps,
+            'cpu_s': time.process_time() - cpu0, 'stops': stops,
+            'step_ms': {n: (np.array(dt[n]) * 1e3).tolist() for n in (3, 6)},
+            'cpu_ms': {n: (np.array(cpu[n]) * 1e-6).tolist() for n in (3, 6)}}
+
+
+_SIX = {}
+
+
+def _istats(x) -> dict:
+    import numpy as np
+    x = np.asarray(x, float)
+    return {'samples': int(x.size), 'min_ms': float(x.min()),
+            'p10_ms': float(np.percentile(x, 10)), 'median_ms': float(np.median(x)),
+            'p90_ms': float(np.percentile(x, 90)), 'p99_ms': float(np.percentile(x, 99)),
+            'max_ms': float(x.max())}
+
+
+def main_inprocess(a) -> int:
+    out = {'benchmark': 'PdPlusController.step alone, 3 and 6 joints stepped alternately in '
+                        'one process (--inprocess)', 'commit': _commit(),
+           'load_average_before': os.getloadavg(), 'runs': [], 'pooled': {}}
+    keys = ('min', 'p10', 'median', 'p90', 'p99')
+    for motion in ('sine', 'rectangle'):
+        pooled = {3: [], 6: []}
+        pooled_cpu = {3: [], 6: []}
+        for r in range(a.repeats):
+            res = inprocess_pair(motion, a.seconds)
+            row = {k: v for k, v in res.items() if k not in ('step_ms', 'cpu_ms')}
+            row['repeat'] = r
+            row['load'] = os.getloadavg()
+            for n in (3, 6):
+                pooled[n] += res['step_ms'][n]
+                pooled_cpu[n] += res['cpu_ms'][n]
+                row[f'{n}_joints'] = _istats(res['step_ms'][n])
+                row[f'{n}_joints_cpu'] = _istats(res['cpu_ms'][n])
+            row['ratio_six_over_three'] = {
+                k: row['6_joints'][f'{k}_ms'] / row['3_joints'][f'{k}_ms'] for k in keys}
+            row['cpu_ratio_six_over_three'] = {
+                k: row['6_joints_cpu'][f'{k}_ms'] / row['3_joints_cpu'][f'{k}_ms']
+                for k in keys}
+            print(json.dumps(row), flush=True)
+            out['runs'].append(row)
+        s3, s6 = _istats(pooled[3]), _istats(pooled[6])
+        c3, c6 = _istats(pooled_cpu[3]), _istats(pooled_cpu[6])
+        out['pooled'][motion] = {
+            '3_joints': s3, '6_joints': s6,
+            'ratio_six_over_three': {k: s6[f'{k}_ms'] / s3[f'{k}_ms'] for k in keys},
+            '3_joints_cpu': c3, '6_joints_cpu': c6,
+            'cpu_ratio_six_over_three': {k: c6[f'{k}_ms'] / c3[f'{k}_ms'] for k in keys}}
+    out['load_average_after'] = os.getloadavg()
+    RESULTS.mkdir(exist_ok=True)
+    name = a.out if a.out != 'six_joint_step_nodes' else 'six_joint_step_inprocess'
+    (RESULTS / f'{name}.json').write_text(json.dumps(out, indent=1))
+    print(json.dumps({k: out[k] for k in ('pooled', 'load_average_after')}, indent=1))
+    return 0
+
+
+def _commit() -> str:
+    import subprocess
+    try:
+        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                              text=True, cwd=os.path.dirname(os.path.abspath(__file__)),
+                              timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ''
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--seconds', type=float, default=20.0, help='listening time per run [s]')
@@ -353,7 +514,12 @@ def main(argv=None):
                     help='--paired: one more parameter of both pdplus (repeatable)')
     ap.add_argument('--out', default='six_joint_step_nodes',
                     help='--lockstep, --paired: results/<out>.json')
+    ap.add_argument('--inprocess', action='store_true',
+                    help='PdPlusController.step alone, 3 and 6 joints alternately, no ROS '
+                         '(module docstring)')
     a = ap.parse_args(argv)
+    if a.inprocess:
+        return main_inprocess(a)
     if a.paired:
         return main_paired(a)
     if a.lockstep:

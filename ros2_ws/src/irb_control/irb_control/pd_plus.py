@@ -483,6 +483,18 @@ class PdPlusController:
         self._ramp_from = np.zeros(n)
         self._ramp_to = np.zeros(n)
         self._lower = np.tril_indices(n, -1)    # strictly lower triangle (``_step_n``)
+        # ``_step_n``'s model terms and friction: on three joints the operations of ``step``
+        # (numpy's exp, crba + Coriolis matrix + gravity: the same result to the bit, tested);
+        # on any other joint count the cheaper formulation of the same quantities (one
+        # rounding apart: two RNEA passes, math.exp on floats; ``_model_terms_n``)
+        self._fast = n != 3
+        self._pm0 = pin.Model(self._pm)             # the same arm without gravity
+        self._pm0.gravity.linear[:] = 0.0
+        self._pd0 = self._pm0.createData()
+        self._zero_a = np.zeros(n)
+        # ``_model_terms_n``'s operands, filled in place each step (a slice assignment from a
+        # list costs about a third of np.array(list); pinocchio keeps no reference to them)
+        self._buf = np.zeros((4, n))
         self._ramp_T = c.ramp_min_duration_s
         self._two_pi = 2.0 * np.pi
         self.base_path = path            # the configured path: plans that carry none
@@ -913,7 +925,9 @@ class PdPlusController:
     def _step_n(self, t: float, q: np.ndarray, qd: np.ndarray) -> ControlOutput:
         """``step`` on n joints (the six-joint arm): the same operations, in the same order,
         on n-lists instead of unrolled floats (on three joints the same result to the bit as
-        ``step``, tested); every change to ``step`` belongs here too."""
+        ``step``, tested); every change to ``step`` belongs here too. On n != 3 joints the
+        model terms and the friction's exp take a cheaper formulation of the same quantities
+        (``_model_terms_n``, ``_fast``: one rounding apart, tested in the closed loop)."""
         n = self.n
         R = range(n)
         q = np.asarray(q, dtype=float)
@@ -932,7 +946,7 @@ class PdPlusController:
         vm, lo, hi = self.v_max.tolist(), self.q_lo.tolist(), self.q_hi.tolist()
         if any([abs(w) > v for w, v in zip(wl, vm)]):
             self.stop(f'speed limit: |qd| = {np.abs(qd).round(3).tolist()} rad/s')
-        elif any([x < y for x, y in zip(ql, lo)]) or any([x > y for x, y in zip(ql, hi)]):
+        elif any([x < y or x > z for x, y, z in zip(ql, lo, hi)]):
             self.stop(f'position limit: q = {q.round(4).tolist()} rad')
         if self.mode == MODE_STOPPED:
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason,
@@ -948,13 +962,20 @@ class PdPlusController:
         fl = self._in_flight
         if self._commanded and len(fl) == self.config.prediction_samples:
             T = self.config.period_s
-            sv = [0.0] * n
-            sp = [0.0] * n
-            for wj, b in zip(self._w_pos, fl):
-                sv = [x + y for x, y in zip(sv, b)]
-                sp = [x + wj * y for x, y in zip(sp, b)]
-            p = [x + d * w + y for x, w, y in zip(ql, wl, sp)]
-            uu = [w + T * y for w, y in zip(wl, sv)]
+            if len(fl) == 3:    # the default: the sums of ``step`` per joint, in its order
+                w0, w1, w2 = self._w_pos
+                b0, b1, b2 = fl
+                p = [x + d * w + (((0.0 + w0 * y0) + w1 * y1) + w2 * y2)
+                     for x, w, y0, y1, y2 in zip(ql, wl, b0, b1, b2)]
+                uu = [w + T * (((0.0 + y0) + y1) + y2) for w, y0, y1, y2 in zip(wl, b0, b1, b2)]
+            else:
+                sv = [0.0] * n
+                sp = [0.0] * n
+                for wj, b in zip(self._w_pos, fl):
+                    sv = [x + y for x, y in zip(sv, b)]
+                    sp = [x + wj * y for x, y in zip(sp, b)]
+                p = [x + d * w + y for x, w, y in zip(ql, wl, sp)]
+                uu = [w + T * y for w, y in zip(wl, sv)]
         else:
             c2 = 0.5 * d * d
             p = [x + d * w + c2 * y for x, w, y in zip(ql, wl, qdd_ref)]
@@ -967,32 +988,19 @@ class PdPlusController:
                       f'{self.e_max.tolist()}')
             return ControlOutput(False, np.zeros(n), self.mode, self.stop_reason, theta,
                                  theta_p, theta_dot_ref, **self._nan_fields())
-        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g
-        q_p = np.array(p)
-        pm, pd = self._pm, self._pd
-        # symmetric M from the upper triangle pinocchio fills (= np.triu(M) + np.triu(M, 1).T,
-        # +0.0 as there; np.triu itself costs ~50 us)
-        M = pin.crba(pm, pd, q_p) + 0.0
-        low = self._lower
-        M[low] = M.T[low]
-        qd_ref_a = np.array(qd_ref)
-        qdd_ref_a = np.array(qdd_ref)
-        Ma = (M @ qdd_ref_a).tolist()
-        Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ qd_ref_a).tolist()
-        g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
-        tm = [x + y + z for x, y, z in zip(Ma, Cb, g)]
+        # model terms at the predicted state: M qdd_ref + C(q, qd) qd_ref + g, M's diagonal
+        tm, mdg = self._model_terms_n(p, uu, qd_ref, qdd_ref)
         pf = self._pred_flight
         if self.friction is not None:
             xs = uu
             if self._stick_pred and len(pf) == self.config.prediction_samples:
                 xs = list(uu)
-                mdg = M.diagonal().tolist()
                 for i in self._hump_joints:
                     xs[i] = self._predict_speed(i, wl[i], mdg[i], pf)
             tf = self._friction_torque_n(qd_ref, uu, xs)
         else:
             tf = zero
-        kp, kd = self._gains(M.diagonal().tolist())
+        kp, kd = self._gains(mdg)
         fb = [a * x + b * y for a, x, b, y in zip(kp, e, kd, de)]
         ki = self._ki
         if ki is not None:      # integral action: candidate, bounded to +-limit
@@ -1016,7 +1024,13 @@ class PdPlusController:
         # rate limit around the previous command, then the torque limit
         prev = self._prev_tau.tolist() if self._prev_tau is not None else None
         r, tmax = self.rate_max.tolist(), self.tau_max.tolist()
-        for i in R:
+        if ki is None:          # (np.clip semantics: min(max(x, lo), hi))
+            if prev is not None:
+                tau = [min(max(min(max(x, y - z), y + z), -m), m)
+                       for x, y, z, m in zip(tau, prev, r, tmax)]
+            else:
+                tau = [min(max(x, -m), m) for x, m in zip(tau, tmax)]
+        for i in (R if ki is not None else ()):
             x = tau[i]
             if prev is not None:
                 x = min(max(x, prev[i] - r[i]), prev[i] + r[i])
@@ -1036,9 +1050,46 @@ class PdPlusController:
             fl.append(tuple(qdd_ref))
         if self._stick_pred:
             pf.append(([x - y for x, y in zip(tau, tm)], qdd_ref))
+        # the eight reference/torque fields: rows of one new array (one conversion, not 8)
+        q_r, qd_r, qdd_r, e_a, de_a, tm_a, tf_a, fb_a = np.array(
+            (q_ref, qd_ref, qdd_ref, e, de, tm, tf, fb), dtype=float)
         return ControlOutput(True, tau_a, self.mode, '', theta, theta_p, theta_dot_ref,
-                             np.array(q_ref), qd_ref_a, qdd_ref_a, np.array(e), np.array(de),
-                             np.array(tm), np.array(tf), np.array(fb))
+                             q_r, qd_r, qdd_r, e_a, de_a, tm_a, tf_a, fb_a)
+
+    def _model_terms_n(self, p: list, uu: list, qd_ref: list, qdd_ref: list
+                       ) -> tuple[list, list]:
+        """M(p) qdd_ref + C(p, uu) qd_ref + g(p) and M(p)'s diagonal (lists of n floats) at
+        the predicted state p, uu.
+
+        Three joints (``_fast`` False): as ``step`` computes them (crba, the Coriolis matrix
+        and gravity, numpy's products; the same bits). Otherwise with two RNEA passes: C is
+        linear in its velocity and pinocchio's C(q, v) w is the Christoffel form, symmetric
+        in v and w, so with s = (uu + qd_ref) / 2, d = (uu - qd_ref) / 2
+        C(q, s) s - C(q, d) d = C(q, uu) qd_ref, and
+        rnea(p, s, qdd_ref) - rnea_without_gravity(p, d, 0) = M qdd_ref + C(p, uu) qd_ref + g
+        (one rounding from the matrix formulation: ~1e-14 N m, tested), plus crba for the
+        diagonal the gain schedule and the stiction prediction take (~10 us less on six
+        joints than the Coriolis matrix and the products)."""
+        pm, pd = self._pm, self._pd
+        if self._fast:
+            q_p, s_, d_, a_ = self._buf
+            q_p[:] = p
+            s_[:] = [0.5 * (x + y) for x, y in zip(uu, qd_ref)]
+            d_[:] = [0.5 * (x - y) for x, y in zip(uu, qd_ref)]
+            a_[:] = qdd_ref
+            tm = (pin.rnea(pm, pd, q_p, s_, a_)
+                  - pin.rnea(self._pm0, self._pd0, q_p, d_, self._zero_a)).tolist()
+            return tm, pin.crba(pm, pd, q_p).diagonal().tolist()
+        q_p = np.array(p)
+        # symmetric M from the upper triangle pinocchio fills (= np.triu(M) + np.triu(M, 1).T,
+        # +0.0 as there; np.triu itself costs ~50 us)
+        M = pin.crba(pm, pd, q_p) + 0.0
+        low = self._lower
+        M[low] = M.T[low]
+        Ma = (M @ np.array(qdd_ref)).tolist()
+        Cb = (pin.computeCoriolisMatrix(pm, pd, q_p, np.array(uu)) @ np.array(qd_ref)).tolist()
+        g = pin.computeGeneralizedGravity(pm, pd, q_p).tolist()
+        return [x + y + z for x, y, z in zip(Ma, Cb, g)], M.diagonal().tolist()
 
     def _slide(self, i: int, v: float, u: float, a: float, m: float) -> float:
         """Joint i's speed v [rad/s] one period later under one command in flight: u [N m]
@@ -1064,6 +1115,10 @@ class PdPlusController:
                 u, a = u[i], a[i]
             if abs(v) < rest:
                 v = 0.0
+                # (the first substep's test, ahead of the loop: a joint held at rest costs
+                # no substep loop)
+                if s_neg <= m * a + u - off <= s_pos:
+                    continue
             for _ in range(_SLIDE_SUBSTEPS):
                 if v == 0.0:
                     drive = m * a + u - off     # what friction must hold for the joint to rest
@@ -1109,8 +1164,14 @@ class PdPlusController:
         speeds the ``stribeck_measured`` joints' hump takes (default qd_p)."""
         n = self.n
         a = self.config.friction_blend_a
-        alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
-        v = [alpha[i] * qd_ref[i] + (1.0 - alpha[i]) * qd_p[i] for i in range(n)]
+        if self._fast:      # math.exp on floats (numpy's exp per scalar costs ~0.5 us each)
+            c = 2.0 * a * a
+            exp = math.exp
+            v = [(al := exp(-(x * x) / c)) * x + (1.0 - al) * y for x, y in zip(qd_ref, qd_p)]
+        else:               # numpy's array exp, as ``_friction_torque``
+            alpha = np.exp(np.array([-(x * x) for x in qd_ref]) / (2.0 * a * a)).tolist()
+            exp = np.exp
+            v = [al * x + (1.0 - al) * y for al, x, y in zip(alpha, qd_ref, qd_p)]
         par = self._friction_par
         measured = self._hump_measured or [False] * n
         if qd_hump is None:
@@ -1118,13 +1179,11 @@ class PdPlusController:
         if par is None:     # (stribeck_measured is refused with such maps at construction)
             return self.friction.torque(np.array(v)).tolist()
         out = []
-        exp = np.exp
-        for i in range(n):
-            fcp, fcn, hp, hn, vs, fv, off = par[i]
-            x = v[i]
-            xs = qd_hump[i] if measured[i] else x
+        copysign, nan = math.copysign, math.nan
+        for (fcp, fcn, hp, hn, vs, fv, off), x, xh, mi in zip(par, v, qd_hump, measured):
+            xs = xh if mi else x
             e = float(exp(-((xs / vs) ** 2)))
-            sg = 0.0 if x == 0.0 else (math.copysign(1.0, x) if x == x else math.nan)
+            sg = 0.0 if x == 0.0 else (copysign(1.0, x) if x == x else nan)
             tf = (sg * (fcp + hp * e) if x > 0.0 else sg * (fcn + hn * e)) + fv * x
             out.append(tf + off if off else tf)
         return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import gc
 import math
+import operator
 import queue
 import threading
 import time
@@ -267,6 +268,7 @@ class PdPlusNode(Node):
         self._last_qd = None                    # ... and speed (brakes only at rest)
         self._name_key: tuple | None = None     # names of the last joint state ...
         self._name_idx: tuple | None = None     # ... and the indices of joints 1-3 in them
+        self._name_get = None                   # ... as an itemgetter (six joints)
         # the loop topics travel serialized (cdr.py): no message objects in the hot path
         self._decoder = JointStateDecoder()
         self._cmd_enc = JointStateEncoder(self._names, 0, 0, n)
@@ -695,13 +697,17 @@ class PdPlusNode(Node):
         missing."""
         if names is not self._name_key and names != self._name_key:
             self._name_key = names
-            self._name_idx = _joint_indices(names, self._names)
+            self._name_idx = idx = _joint_indices(names, self._names)
+            # six joints: one C call per array (a generator over six indices costs ~4x)
+            self._name_get = (operator.itemgetter(*idx) if idx is not None and len(idx) > 3
+                              else None)
         idx = self._name_idx
         if idx is None:
             return self._nan_in, self._nan_in
         try:
-            if len(idx) != 3:       # six joints
-                return tuple(position[i] for i in idx), tuple(velocity[i] for i in idx)
+            get = self._name_get
+            if get is not None:       # six joints
+                return get(position), get(velocity)
             i, j, k = idx
             return (position[i], position[j], position[k]), (velocity[i], velocity[j],
                                                              velocity[k])

@@ -295,7 +295,7 @@ def _sample_list(obj, x: float, zero_rates_after_end: bool) -> list:
     i = bisect_left(xl, x) - 1          # = np.searchsorted(grid, x) - 1
     w = (x - xl[i]) / (xl[i + 1] - xl[i])
     a, b = rows[i], rows[i + 1]
-    return [a[k] + w * (b[k] - a[k]) for k in range(len(a))]
+    return [x0 + w * (x1 - x0) for x0, x1 in zip(a, b)]
 
 
 # --- builders ------------------------------------------------------------------------------

@@ -211,6 +211,63 @@ def test_six_joint_closed_loop_follows_path_and_orientation(six, task):
     assert np.degrees(ang.max()) < 1.0, np.degrees(ang.max())
 
 
+def test_six_joint_model_terms_are_the_matrix_formulation(six):
+    """``_model_terms_n`` on six joints (two RNEA passes, C(q, u) w by polarization) against
+    M(q) a + C(q, u) w + g(q) and diag M built here from pinocchio's matrices (the upper
+    triangle crba fills, the Coriolis matrix, gravity), with u != w, at random states."""
+    import pinocchio as pin
+    ctrl = PdPlusController(six, rectangle_path([0.7, 0.0, 0.3], [0.3, 0.1, 1.0], 0.3, 0.2,
+                                                0.025), six_axis_controller_config())
+    assert ctrl._fast
+    pm = six.model
+    pd = pm.createData()
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        q = rng.uniform(six.limits.lower, six.limits.upper) * 0.8
+        u, w = rng.normal(0.0, 1.5, 6), rng.normal(0.0, 1.5, 6)
+        a = rng.normal(0.0, 5.0, 6)
+        M = pin.crba(pm, pd, q).copy()
+        M = np.triu(M) + np.triu(M, 1).T
+        want = M @ a + pin.computeCoriolisMatrix(pm, pd, q, u) @ w \
+            + pin.computeGeneralizedGravity(pm, pd, q)
+        tm, mdg = ctrl._model_terms_n(q.tolist(), u.tolist(), w.tolist(), a.tolist())
+        scale = np.abs(M @ np.abs(a)).max() + np.abs(want).max()
+        np.testing.assert_allclose(tm, want, rtol=0, atol=1e-12 * scale)
+        assert mdg == M.diagonal().tolist()
+
+
+def test_six_joint_step_equals_the_matrix_formulation_in_closed_loop(six, task):
+    """The six-joint step's cheap formulation (``_fast``: RNEA model terms, math.exp in the
+    friction feed-forward) against the matrix formulation of the three-joint step
+    (``_fast`` False: crba, Coriolis matrix, gravity, numpy's exp) in the closed loop with
+    config/pdplus_six_axis.yaml (stiction prediction on the wrist, which moves): the same
+    modes and commands sent, every array within 1e-9 of its largest value."""
+    path, law = task
+    kin = SixAxisKinematics(tcp=TCP)
+    cfg = joint_path6(kin, path, law, np.linspace(0.0, 2 * np.pi, 721)).configuration
+    t, th, thd, thdd = polynomial_theta_of_time(3.0)
+    prof = profile_from_theta_samples(
+        six, path, th, thd, thdd, t, grid=721,
+        joints=lambda x: joint_path6(kin, path, law, x, configuration=cfg, derivatives=True))
+    runs = []
+    for fast in (True, False):
+        plant, ctrl = build_six_joint(prof, path, TCP, friction_mode='file', model=six)
+        assert ctrl._stick_pred and ctrl._fast
+        ctrl._fast = fast
+        runs.append(simulate_closed_loop(plant, ctrl, 4.0))
+    a, b = runs
+    assert a.stop_reason == b.stop_reason == '' and a.finished()
+    assert np.array_equal(a.mode, b.mode) and np.array_equal(a.published, b.published)
+    assert np.ptp(a.q[:, 3:], axis=0).min() > 0.05          # the wrist moves
+    for k in FIELDS:
+        x, y = np.asarray(getattr(a, k), float), np.asarray(getattr(b, k), float)
+        assert x.shape == y.shape, k
+        assert np.array_equal(np.isnan(x), np.isnan(y)), k
+        ok = ~np.isnan(x)
+        scale = max(np.abs(x[ok]).max(), 1e-300) if ok.any() else 1.0
+        np.testing.assert_allclose(x[ok], y[ok], rtol=0, atol=1e-9 * scale, err_msg=k)
+
+
 def test_simulator_node_with_six_joints():
     """The simulator node with joints:=6: all six joints measured in /joint_states, commands
     of six joints by name applied, a three-joint command refused (in-process, no DDS)."""
