@@ -13,6 +13,7 @@ answered.
 """
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import operator
@@ -91,7 +92,8 @@ SPEC = NodeSpec(
               'term on the measured speed; [] = all on the reference blend', type='bool[]'),
         Param('stiction_prediction', _d.stiction_prediction, '', 'joints 6: the '
               'stribeck_measured joints\' speed carried over the delay by a stick-slip model of '
-              'the commands in flight (doc/six_joint.md)'),
+              'the commands in flight; only with friction_mode file (an identified map: '
+              'off with a warning otherwise; doc/six_joint.md)'),
         Param('stiction_rest_speed_rad_s', _d.stiction_rest_speed_rad_s, 'rad/s',
               'stiction_prediction: a joint measured slower starts at rest'),
         Param('theta_max_lead_rad', _d.theta_max_lead_rad, 'rad', 'progress governor lead; '
@@ -222,6 +224,13 @@ class PdPlusNode(Node):
             stribeck_measured=tuple(bool(x) for x in P['stribeck_measured']) or None,
             stiction_prediction=bool(P['stiction_prediction']),
             stiction_rest_speed_rad_s=P['stiction_rest_speed_rad_s'])
+        if cfg.stiction_prediction and P['friction_mode'] != 'file':
+            # the prediction trusts the map's breakaway levels: with the nominal map it made
+            # the wrist worse than without it (0.74 against 0.44 deg, doc/six_joint.md)
+            cfg = dataclasses.replace(cfg, stiction_prediction=False)
+            self.log.warn("stiction_prediction is off: it needs an identified map of the "
+                          "wrist (friction_mode 'file' with friction_map_file), not "
+                          f"friction_mode {P['friction_mode']!r} (doc/six_joint.md)")
         friction = controller_friction(self.model, P['friction_mode'], P['friction_map_file'])
         self.ctrl = PdPlusController(self.model, self.path, cfg, friction)
         # profiles let go of (a plan replaced, the old motion at enable) are freed on a thread

@@ -409,3 +409,37 @@ def test_pdplus_node_with_six_joints(six, line_task):
             PdPlusNode(context=ctx, parameter_overrides=[Parameter('joints', value=6)])
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_pdplus_runs_the_stiction_prediction_only_on_a_map_file():
+    """pdplus_six_axis.yaml turns the wrist's stiction prediction on; with the nominal map it
+    made the wrist worse (0.74 against 0.44 deg), so pdplus keeps it only with friction_mode
+    'file' and says so otherwise."""
+    import os
+    import uuid
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.parameter import Parameter
+
+    from irb_control.pdplus_node import PdPlusNode
+    c = six_axis_controller_config()
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '17')))
+    try:
+        for mode, kept in (('nominal', False), ('file', True)):
+            over = [Parameter(k, value=list(getattr(c, k))) for k in (
+                'kp', 'kd', 'torque_rate_limit_nm_s', 'max_tracking_error_rad',
+                'gain_design_inertia_kg_m2')]
+            over += [Parameter('joints', value=6), Parameter('builtin_profile', value='none'),
+                    Parameter('stribeck_measured', value=[False] * 3 + [True] * 3),
+                    Parameter('stiction_prediction', value=True),
+                    Parameter('friction_mode', value=mode),
+                    Parameter('friction_map_file', value=str(default_plant_yaml()))]
+            node = PdPlusNode(context=ctx, namespace=f'/t{uuid.uuid4().hex[:8]}',
+                              parameter_overrides=over)
+            try:
+                assert node.ctrl.config.stiction_prediction is kept, mode
+                assert node.ctrl._stick_pred is kept, mode
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
