@@ -46,10 +46,24 @@ def parse(argv):
     ap.add_argument('--out', default='six_joint', help='results/<out>.json')
     ap.add_argument('--no-prediction', action='store_true',
                     help='tracking without the stiction prediction (the config otherwise)')
+    ap.add_argument('--identified-wrist', metavar='DIR', default=None,
+                    help='also with an identified wrist: six-joint sweeps of joints 4-6 on '
+                         'the offline simulator and their sample fit into DIR (the main '
+                         "job's identify_wrist), joints 1-3 the plant's own map")
+    ap.add_argument('--modes', nargs='+', default=['file', 'nominal'],
+                    choices=['file', 'nominal', 'identified'],
+                    help="feed-forward maps: 'file' the plant's own, 'nominal', "
+                         "'identified' (needs --identified-wrist)")
+    ap.add_argument('--no-step-cost', action='store_true', help='tracking only')
     ap.add_argument('--plain-pd', action='store_true',
                     help="tracking without config/pdplus_six_axis.yaml's wrist stiction "
                          'measures (no integral, Stribeck term on the reference blend)')
-    return ap.parse_args(argv)
+    a = ap.parse_args(argv)
+    if 'identified' in a.modes and not a.identified_wrist:
+        ap.error("--modes identified needs --identified-wrist DIR")
+    if a.identified_wrist and 'identified' not in a.modes:
+        a.modes.append('identified')
+    return a
 
 
 def main(argv=None):
@@ -122,15 +136,28 @@ def main(argv=None):
                 'tcp_speed_max_m_s': float(v.max()), 'tcp_speed_mean_m_s': float(v.mean()),
                 'joint_error_max_rad': je.tolist(), 'energy_J': float(r.energy)}
 
+    maps = {'file': None, 'nominal': None}
+    if a.identified_wrist:
+        from irb_control.plant import default_plant_yaml
+
+        from irb_bringup.six_axis_phase import identify_wrist, six_joint_ff_map
+        wdir = Path(a.identified_wrist)
+        wdir.mkdir(parents=True, exist_ok=True)
+        wrist_map, info = identify_wrist(wdir, [0.1, 0.3, 1.0, 2.0], 1.0, log=print)
+        maps['identified'], label = six_joint_ff_map(
+            default_plant_yaml(), wrist_map, wdir / 'ff_map.yaml',
+            arm_label="the plant's own (config/plant.yaml)")
+        out['identified_wrist'] = {'map': str(maps['identified']), 'label': label, **info}
     out['tracking'] = []
     profiles = {}
     for name, tr in plans.items():
         prof = profile_from_joint_trajectory(six, path, tr['t'], tr['q'], tr['qd'], tr['qdd'])
         profiles[name] = (prof, float(tr['t'][-1]))
-        for mode in ('file', 'nominal'):
+        for mode in a.modes:
             for seed in a.seeds:
                 plant, ctrl = build_six_joint(
-                    prof, path, tcp, friction_mode=mode, model=six, controller_config=cc,
+                    prof, path, tcp, friction_mode='file' if mode == 'identified' else mode,
+                    friction_file=maps[mode], model=six, controller_config=cc,
                     plant_config=PlantConfig(initial_q=tuple(prof.q[0].tolist()), seed=seed))
                 r = simulate_closed_loop(plant, ctrl, float(tr['t'][-1]) + 1.5)
                 row = {'plan': name, 'friction_ff': mode, 'seed': seed,
@@ -142,6 +169,11 @@ def main(argv=None):
                     'orientation_error_max_deg', 'tool_axis_tilt_max_deg', 'stop_reason')}),
                     flush=True)
 
+    if a.no_step_cost:
+        out['load_average_after'] = os.getloadavg()
+        RESULTS.mkdir(exist_ok=True)
+        (RESULTS / f'{a.out}.json').write_text(json.dumps(out, indent=1))
+        return 0
     # --- step cost, six vs three joints, interleaved ---------------------------------------
     three = RobotModel.load()
     prof6, dur6 = profiles['trapezoid']
