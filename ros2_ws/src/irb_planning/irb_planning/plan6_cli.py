@@ -22,8 +22,9 @@ Placement (``--place-n``): the task (path and orientation law) moved by every of
 box ``--place-lo`` .. ``--place-hi`` [m] (relative to the path file's placement; a translation,
 so the tool orientations are the file's), an energy plan of ``--duration`` at each on the coarse
 ``--place-grid``, checked as played; the map is printed (energy of ``--energy-model`` or the
-reason of each refusal), then the best placement is planned on the full grid and is the plan
-printed, written (``--json``) and published. Exit 1 if no placement can be planned. Exit 0
+reason of each refusal); ``--place-refine MIN_STEP`` then searches from the grid's best by
+compass steps inside the box (a local search, no bound); the best placement is planned on the
+full grid and is the plan printed, written (``--json``) and published. Exit 1 if no placement can be planned. Exit 0
 planned, 1 refused (unreachable, too short, fails the check), 2 bad arguments or path file.
 
 ``--publish``: hands the plan to pdplus (``joints:=6``) as the planner node does: a latched
@@ -74,6 +75,9 @@ def parse_args(argv):
     p.add_argument('--place-grid', type=int, default=40,
                    help='theta nodes of each placement\'s plan (the best is re-planned on '
                    '--grid)')
+    p.add_argument('--place-refine', type=float, default=0.0, metavar='MIN_STEP',
+                   help='[m] after the grid, a compass search from its best offset inside the '
+                   'box (steps of the grid spacing, halved down to MIN_STEP; 0 = off)')
     p.add_argument('--json', default='', help="write the plan and its points here ('' = no)")
     p.add_argument('--publish', action='store_true',
                    help='publish the plan on /planned_trajectory (latched) for pdplus '
@@ -196,12 +200,33 @@ def search(planner, spec: dict, a):
         print(f'  [{k}/{m}] offset {d} m: {what}', flush=True)
     res = place(planner, spec, offsets, a.duration, a.energy_model, a.place_grid, progress)
     best = res.best
+    if best is not None and a.place_refine > 0:
+        import numpy as np
+
+        from .six_axis_plan import refine_placement
+        lo, hi, n = (np.asarray(v, float) for v in (a.place_lo, a.place_hi, a.place_n))
+        step = np.where(n > 1, (hi - lo) / np.maximum(n - 1, 1), (hi - lo) / 2.0)
+        print(f'placement: compass search from {" ".join(f"{x:+.3f}" for x in best.offset)} '
+              f'm, steps {" ".join(f"{x:.3f}" for x in step)} m halved down to '
+              f'{a.place_refine:g} m', flush=True)
+
+        def refine_progress(k, h, pt):
+            progress(k, f'search, step {max(h):.3f} m', pt)
+        res = refine_placement(planner, spec, res, lo, hi, step, a.place_refine,
+                               refine_progress)
+        best = res.best
     if best is not None:
         worst = max(p.energy for p in res.planned)
         print(f'placement: best offset {" ".join(f"{x:+.3f}" for x in best.offset)} m, '
               f'{best.energy:.2f} {unit} on grid {a.place_grid} ({len(res.planned)} of '
               f'{len(offsets)} planned; worst {worst:.2f}, {100 * (worst / best.energy - 1):.1f} '
               '% more); planning it on the full grid', flush=True)
+        from .six_axis_plan import on_box_edge
+        edge = on_box_edge(best.offset, a.place_lo, a.place_hi)
+        if edge:
+            print('placement: the best offset lies on the box\'s face in '
+                  + ', '.join('xyz'[ax] for ax in edge) + ': a lower energy may lie outside '
+                  'the box (widen --place-lo/--place-hi)', flush=True)
     return res
 
 
@@ -239,6 +264,10 @@ def main(args=None):
             or any(h < lo for lo, h in zip(a.place_lo, a.place_hi))):
         print('plan6: --place-n needs an energy plan, 1 .. 1000 points, finite --place-lo <= '
               f'--place-hi and --place-grid {MIN_GRID} .. {MAX_GRID}', file=sys.stderr)
+        return 2
+    if not (0.0 <= a.place_refine < 1.0) or (a.place_refine > 0 and a.place_n is None):
+        print('plan6: --place-refine is a step [m] in 0 .. 1 and needs --place-n',
+              file=sys.stderr)
         return 2
     if a.tcp is not None and not all(abs(x) < 1.0 for x in a.tcp):
         print('plan6: --tcp must be finite and within 1 m of tool0', file=sys.stderr)

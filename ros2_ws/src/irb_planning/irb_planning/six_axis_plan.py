@@ -700,3 +700,54 @@ def place(planner: SixAxisPlanner, spec: dict, offsets, duration: float,
         if progress is not None:
             progress(k + 1, len(offsets), pt)
     return SixAxisPlacement(points, energy_model, float(duration), int(grid_size))
+
+
+
+def refine_placement(planner: SixAxisPlanner, spec: dict, result: SixAxisPlacement, lo, hi,
+                     step, min_step: float, progress=None) -> SixAxisPlacement:
+    """Compass search from ``result``'s best offset, inside the box [lo, hi] (3,) [m]: plan
+    the 6 neighbours at +-``step`` (3,) [m] along each axis (on the result's grid, duration
+    and energy model, as ``place``); move to the best that is lower, else halve the step,
+    until every axis's step is below ``min_step`` [m]. Every point planned is kept (the
+    grid's and the search's); the best of all is ``best``. A local search: it finds a lower
+    energy near the grid's best, it proves nothing about the box (no bound)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    h = np.asarray(step, float).copy()
+    best = result.best
+    if best is None:
+        return result
+    seen = {tuple(np.round(p.offset, 9)): p for p in result.points}
+    points = list(result.points)
+    x, e = best.offset.copy(), best.energy
+    while np.any(h >= min_step):
+        trial = []
+        for ax in range(3):
+            if h[ax] < min_step:
+                continue
+            for sgn in (-1.0, 1.0):
+                d = x.copy()
+                d[ax] = np.clip(d[ax] + sgn * h[ax], lo[ax], hi[ax])
+                key = tuple(np.round(d, 9))
+                if key not in seen:
+                    pt = place(planner, spec, d[None], result.duration, result.energy_model,
+                               result.grid_size).points[0]
+                    seen[key] = pt
+                    points.append(pt)
+                    if progress is not None:
+                        progress(len(points), h.copy(), pt)
+                trial.append(seen[key])
+        better = [p for p in trial if np.isfinite(p.energy) and p.energy < e]
+        if better:
+            b = min(better, key=lambda p: p.energy)
+            x, e = b.offset.copy(), b.energy
+        else:
+            h = h / 2.0
+    return SixAxisPlacement(points, result.energy_model, result.duration, result.grid_size)
+
+
+def on_box_edge(offset, lo, hi, tol: float = 1e-9) -> list:
+    """The axes (0, 1, 2) on which ``offset`` lies on the box's face: there a lower energy may
+    lie outside the box."""
+    o, lo, hi = (np.asarray(v, float) for v in (offset, lo, hi))
+    return [ax for ax in range(3) if hi[ax] > lo[ax] and (o[ax] <= lo[ax] + tol
+                                                          or o[ax] >= hi[ax] - tol)]

@@ -132,7 +132,9 @@ def test_plan6_refuses_bad_files_in_one_line(tmp_path, capsys):
     assert '--duration' in capsys.readouterr().err
     for bad in (['--grid', '5'], ['--tcp', '0', '0', 'nan'], ['--duration', 'inf'],
                 ['--place-n', '0', '1', '1'], ['--place-n', '2', '2', '2', '--place-lo', '0',
-                                               '0', '0', '--place-hi', '0', '-1', '0']):
+                                               '0', '0', '--place-hi', '0', '-1', '0'],
+                ['--place-refine', '0.01'], ['--place-n', '2', '2', '2', '--place-refine',
+                                             '-0.01']):
         assert main(['--path-file', str(three_axis), '--duration', '2'] + bad) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
@@ -289,3 +291,43 @@ def test_linear_slerp_keyframe_refused_with_its_reason():
     assert law.easing == 'smooth'
     plan = planner.plan(planner.problem(path, law, GRID), 'energy', 2.2)
     assert plan.check.ok and plan.check.orientation_error < np.radians(0.05)
+
+
+def test_compass_refinement_of_a_placement_finds_the_minimum_inside_the_box(monkeypatch):
+    """refine_placement on a stand-in energy (a bowl about c, refused where x < -0.05): from
+    the 3 x 3 x 3 grid's best it walks to c within the last step, never plans a point twice or
+    outside the box, keeps every point; with c outside the box it stops on the box's face
+    and says so."""
+    from irb_planning import six_axis_plan as sap
+
+    calls = []
+
+    def fake_place(planner, spec, offsets, duration, energy_model='electrical',
+                   grid_size=40, progress=None):
+        pts = []
+        for d in np.atleast_2d(offsets):
+            calls.append(tuple(np.round(d, 9)))
+            if d[0] < -0.05:
+                pts.append(sap.PlacementPoint(d.copy(), float('nan'), 'unreachable'))
+            else:
+                pts.append(sap.PlacementPoint(d.copy(), float(100 + 1e3 * np.sum((d - c) ** 2))))
+        return sap.SixAxisPlacement(pts, energy_model, duration, grid_size)
+    monkeypatch.setattr(sap, 'place', fake_place)
+    lo, hi = np.full(3, -0.1), np.full(3, 0.1)
+    grid = sap.placement_offsets(lo, hi, [3, 3, 3])
+    for c, inside in ((np.array([0.03, -0.02, 0.05]), True),
+                      (np.array([0.25, 0.0, 0.04]), False)):
+        calls.clear()
+        res = fake_place(None, {}, grid, 8.0)
+        assert res.best.offset.tolist() == pytest.approx(
+            [0.1 if not inside else 0.0, 0.0, 0.0])
+        out = sap.refine_placement(None, {}, res, lo, hi, [0.1, 0.1, 0.1], 0.01)
+        best = out.best
+        assert len(set(calls)) == len(calls)                       # no point planned twice
+        assert len(out.points) == len(calls)
+        assert all(np.all((p.offset >= lo) & (p.offset <= hi)) for p in out.points)
+        target = np.clip(c, lo, hi)
+        assert np.all(np.abs(best.offset - target) <= 0.0125 + 1e-12), (best.offset, target)
+        assert best.energy <= res.best.energy
+        assert sap.on_box_edge(best.offset, lo, hi) == ([] if inside else [0])
+        assert any(not np.isfinite(p.energy) for p in out.points)   # refusals kept
