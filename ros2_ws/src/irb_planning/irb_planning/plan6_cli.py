@@ -24,8 +24,9 @@ so the tool orientations are the file's), an energy plan of ``--duration`` at ea
 ``--place-grid``, checked as played; the map is printed (energy of ``--energy-model`` or the
 reason of each refusal); ``--place-refine MIN_STEP`` then searches from the grid's best by
 compass steps inside the box (a local search, no bound); the best placement is planned on the
-full grid and is the plan printed, written (``--json``) and published. Exit 1 if no placement can be planned. Exit 0
-planned, 1 refused (unreachable, too short, fails the check), 2 bad arguments or path file.
+full grid and is the plan printed, written (``--json``) and published. Exit 1 if no placement
+can be planned. Exit 0 planned, 1 refused (unreachable, too short, fails the check), 2 bad
+arguments or path file.
 
 ``--publish``: hands the plan to pdplus (``joints:=6``) as the planner node does: a latched
 ``trajectory_msgs/JointTrajectory`` of joint_1..6 (positions, velocities, accelerations at the
