@@ -182,6 +182,10 @@ def summary(plan, limits, smooth=None) -> str:
             lines += ['  jerk limit    ' + ' '.join(f'{v:8.1f}' for v in smooth.jerk),
                       '  rate limit    ' + ' '.join(f'{v:8.0f}' for v in smooth.torque_rate),
                       f'  TCP jerk limit {smooth.tcp_jerk:g} m/s^3']
+    if c.tcp_speed_peak == c.tcp_speed_peak:          # a process block: the band as played
+        lines += [f'process         TCP speed {c.tcp_speed_peak:.4f} m/s peak, '
+                  f'{c.tcp_speed_low:.4f} m/s lowest beyond the ramps, |TCP acceleration| '
+                  f'{c.tcp_accel_peak:.3f} m/s^2 peak (played, within the band)']
     lines += [f'note: {n}' for n in plan.notes]
     return '\n'.join(lines)
 
@@ -274,11 +278,12 @@ def main(args=None):
         print('plan6: --tcp must be finite and within 1 m of tool0', file=sys.stderr)
         return 2
     from .six_axis_plan import (SixAxisPlanError, SixAxisPlanner, read_task_file,
-                                task_from_spec)
+                                task_from_spec, task_process)
     try:
         path, law = read_task_file(a.path_file)
         from irb_description.path import read_path_spec
-        spec = read_path_spec(a.path_file) if (a.publish or a.place_n) else None
+        spec = read_path_spec(a.path_file)
+        process = task_process(spec)
     except SixAxisPlanError as exc:
         print(f'plan6: {exc}', file=sys.stderr)
         return 2
@@ -297,7 +302,8 @@ def main(args=None):
         spec = translated_spec(spec, placement.best.offset)
         path, law = task_from_spec(spec)
     try:
-        prob = planner.problem(path, law, a.grid or None, energy_model=a.energy_model)
+        prob = planner.problem(path, law, a.grid or None, energy_model=a.energy_model,
+                               process=process)
         plan = planner.plan(prob, a.objective, a.duration)
     except SixAxisPlanError as exc:
         print(f'plan6: refused: {exc}', file=sys.stderr)
@@ -316,6 +322,10 @@ def main(args=None):
                'peak_torque_rate_nm_s': None if plan.check.peak_torque_rate is None
                else plan.check.peak_torque_rate.tolist(),
                'tcp_jerk_peak_m_s3': plan.check.tcp_jerk_peak,
+               'process': None if not process else {
+                   **process, 'played_tcp_speed_peak_m_s': plan.check.tcp_speed_peak,
+                   'played_tcp_speed_low_m_s': plan.check.tcp_speed_low,
+                   'played_tcp_accel_peak_m_s2': plan.check.tcp_accel_peak},
                'played_position_error_m': plan.check.position_error,
                'played_orientation_error_rad': plan.check.orientation_error,
                'peak_torque_nm': plan.check.peak_torque.tolist(),

@@ -36,8 +36,8 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import BPoly
 
-from .verify import (LIMIT_RTOL, DHTable, MapFriction, PathCurve, SmoothLimits,
-                     check_smooth, dh_point_rates)
+from .verify import (LIMIT_RTOL, DHTable, MapFriction, PathCurve, SmoothLimits, TcpBand,
+                     check_band, check_smooth, dh_point_rates)
 
 
 
@@ -99,6 +99,12 @@ class PlayedCheck:
     tcp_jerk_peak: float = float('nan')              # [m/s^3] as played
     blend: dict = field(default_factory=dict)        # the same peaks inside smooth_exempt
     electrical_energy: float = float('nan')          # [J] of the played torques and speeds
+    # process constraints (``band``), as played: peak TCP speed [m/s], lowest TCP speed away
+    # from the rest ends [m/s], peak |TCP acceleration| [m/s^2], lowest speed / floor
+    tcp_speed_peak: float = float('nan')
+    tcp_speed_low: float = float('nan')
+    tcp_accel_peak: float = float('nan')
+    tcp_floor_ratio: float = float('nan')
 
     @property
     def ok(self) -> bool:
@@ -111,7 +117,8 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
                  rate_hz: float = 10_000.0, position_tol: float = 1e-4,
                  orientation_tol: float = np.radians(0.05),
                  smooth: SmoothLimits | None = None, smooth_exempt=None,
-                 electrical=None) -> PlayedCheck:
+                 electrical=None, band: TcpBand | None = None,
+                 rest: bool = True) -> PlayedCheck:
     """Play the points and measure (module docstring).
 
     path: anything with point, d_point, dd_point (theta -> (M, 3)) and closed;
@@ -121,7 +128,9 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
     ``joint_names``): the torque as played (None: not checked); ``smooth``: the smoothness
     limits checked (None: measured only, with the torques), ``smooth_exempt`` (B, 2) [s] the
     windows reported apart; ``electrical``: an ``ElectricalModel`` of the six axes (the
-    played electrical energy, with the torques)."""
+    played electrical energy, with the torques); ``band``: process constraints (TCP speed
+    band, |TCP acceleration|; ``verify.check_band``, the three-axis check's rule, on the TCP
+    of the DH product), the floor away from the rest ends if ``rest``."""
     t, q, qd, qdd = (np.asarray(x, float) for x in (t, q, qd, qdd))
     problems = []
     if not all(np.all(np.isfinite(x)) for x in (t, q, qd, qdd)) or t.size < 2 \
@@ -178,10 +187,18 @@ def check_played(t, q, qd, qdd, path, rotation: Callable, tcp: np.ndarray, dh: D
             problems.append(f'joint {i + 1} torque {peak_tau[i]:.2f} N m > {torque[i]:.2f}')
         smooth_out = _smoothness(ts, qs, qds, qdds, jerk, tau_r, tcp, dh, smooth,
                                  smooth_exempt, problems)
+    band_out = {}
+    if band is not None and band.active:
+        rates = dh_point_rates(dh, qs, qds, qdds, origin=tcp[:, 3], positions=True)
+        band_out = dict(zip(('tcp_speed_peak', 'tcp_speed_low', 'tcp_accel_peak',
+                             'tcp_floor_ratio'),
+                            check_band(band, ts, qs, qds, qdds, curve, None, rest, problems,
+                                       rates)))
     return PlayedCheck(float(pos[kp]), float(ori[ko]), float(ts[kp]), float(ts[ko]),
                        float(pos_pts.max()), float(ori_pts.max()), peak_v, peak_tau, energy,
                        float(t[-1] - t[0]), int(ts.size), problems, ts, pos, ori,
-                       np.abs(qdds).max(axis=0), electrical_energy=elec, **smooth_out)
+                       np.abs(qdds).max(axis=0), electrical_energy=elec, **smooth_out,
+                       **band_out)
 
 
 def _smoothness(ts, qs, qds, qdds, jerk, tau_r, tcp, dh: DHTable, smooth, exempt,

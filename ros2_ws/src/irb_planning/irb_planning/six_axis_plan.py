@@ -49,19 +49,22 @@ from irb_description.friction import FrictionMap, JointFriction
 from irb_description.orientation import (ORIENTATION_KEY, OrientationLaw, joint_path6,
                                          orientation_from_spec)
 from irb_description.params import load_dynamics, load_kinematics
-from irb_description.path import PROCESS_KEY, JointPath, PathBase, path_from_spec
+from irb_description.path import (PROCESS_KEY, JointPath, PathBase, path_from_spec,
+                                   process_from_spec)
 from irb_description.six_axis import SixAxisKinematics, UnreachablePoseError, pose, rpy_matrix
 from irb_description.six_axis_model import nominal_six_joint_friction
 from irb_description.trajectory_rules import (CONSISTENCY_ATOL, CONSISTENCY_RTOL,
                                               MIN_POINT_SPACING_S, worst_inconsistency)
 
-from .planner import (PlannerSettings, blend_windows, jerk_path, message_points,
-                      theta_grid, tighten_smooth)
+from .planner import (PlannerSettings, band_text, blend_windows, jerk_path, message_points,
+                      tcp_path, theta_grid, tighten_band, tighten_smooth)
 from .problem import casadi_friction, path_dynamics
 from .profile import ThetaProfile
+from .request import PlanError
 from .six_axis_check import DHTable, PlayedCheck, SmoothLimits, check_played
-from .transcription import (BOUNDARY_REST, TIME_OBJECTIVE_ENERGY_WEIGHT, SolveRequest,
-                            Transcription)
+from .transcription import (BOUNDARY_REST, RAMP_SPEED_EXPONENT, TIME_OBJECTIVE_ENERGY_WEIGHT,
+                            SolveRequest, Transcription)
+from .verify import TcpBand
 
 CONFIG_NAME = 'six_axis_plan.yaml'
 OBJECTIVES6 = ('energy', 'time')
@@ -147,6 +150,27 @@ def tcp_from_config(cfg: dict) -> np.ndarray:
                 np.asarray(t.get('xyz', [0.0, 0.0, 0.0]), float))
 
 
+def process_band(process: dict | None, jerk_limits: bool = True) -> TcpBand | None:
+    """A path file's process block (``irb_description.path.process_from_spec``'s mapping) as
+    the check's TcpBand (None without one), its ramp floor rising as the three-axis planner's
+    (exponent 2/3 with the jerk limits: a constant-jerk start; else 1/2)."""
+    if not process:
+        return None
+    band = TcpBand(process.get('tcp_speed_max', 0.0), process.get('tcp_speed_min', 0.0),
+                   process.get('tcp_accel_max', 0.0), process.get('tcp_ramp_length', 0.0),
+                   RAMP_SPEED_EXPONENT if jerk_limits else 0.5)
+    return band if band.active else None
+
+
+def task_process(spec) -> dict:
+    """The process block of a path mapping (``process_from_spec``; {} without one);
+    SixAxisPlanError with one line for a bad one."""
+    try:
+        return process_from_spec(spec)
+    except ValueError as exc:
+        raise SixAxisPlanError(str(exc)) from None
+
+
 # --- path files with an orientation block -------------------------------------------------
 def task_from_spec(spec) -> tuple[PathBase, OrientationLaw]:
     """(path, law) from a path mapping with an ``orientation`` block; SixAxisPlanError with
@@ -156,10 +180,6 @@ def task_from_spec(spec) -> tuple[PathBase, OrientationLaw]:
     if ORIENTATION_KEY not in spec:
         raise SixAxisPlanError("a six-axis path needs an 'orientation' block (law: fixed, "
                                'path_normal or slerp; irb_description doc/six_axis.md)')
-    if spec.get(PROCESS_KEY):
-        raise SixAxisPlanError("the six-axis planner takes no 'process' block yet (TCP speed "
-                               'band, acceleration): plan it with the three-axis planner or '
-                               'remove the block')
     geometry = {k: v for k, v in spec.items() if k not in (ORIENTATION_KEY, PROCESS_KEY)}
     try:
         path = path_from_spec(geometry)
@@ -234,6 +254,7 @@ class SixAxisProblem:
     build_time: float
     min_duration: dict = field(default_factory=dict)
     energy_model: str = 'mechanical'
+    band: TcpBand | None = None          # process constraints (TCP speed band, |TCP accel|)
 
 
 @dataclass
@@ -385,11 +406,16 @@ class SixAxisPlanner:
 
     def problem(self, path: PathBase, law: OrientationLaw, grid_size: int | None = None,
                 configuration=None, seed=None, boundary: str = BOUNDARY_REST,
-                energy_model: str = 'mechanical') -> SixAxisProblem:
+                energy_model: str = 'mechanical', process: dict | None = None
+                ) -> SixAxisProblem:
         """Build the NLP for ``path`` with ``law`` (configuration kept all along: given, or the
         one nearest ``seed`` at the start, or the first that solves the path), its energy
-        objective on ``energy_model`` (ENERGY_MODELS6)."""
+        objective on ``energy_model`` (ENERGY_MODELS6); ``process``: a path file's process
+        block (``process_from_spec``: tcp_speed_max, tcp_speed_min, tcp_accel_max,
+        tcp_ramp_length) as rows of the NLP and checked as played, as the three-axis
+        planner does."""
         s = self.settings
+        band = process_band(process, s.jerk_limits)
         if energy_model not in ENERGY_MODELS6:
             raise SixAxisPlanError(f'energy model must be one of {list(ENERGY_MODELS6)}, '
                                    f'not {energy_model!r}')
@@ -429,17 +455,23 @@ class SixAxisPlanner:
                            tol=s.tolerance, warm_start=True, sides=sides,
                            electrical=electrical,
                            bus_mode=electrical.bus_mode if electrical is not None else 'shared',
-                           electrical_smoothing=s.electrical_smoothing_w, jerk=jerk)
+                           electrical_smoothing=s.electrical_smoothing_w, jerk=jerk,
+                           **({} if band is None else dict(
+                               tcp=tcp_path(path, theta), accel_rows=band.accel_max > 0,
+                               band_rows=band.speed_max > 0 or band.speed_min > 0)))
         return SixAxisProblem(path, law, cfg, q0, theta, nodes, mids, tr, sample,
-                              time.perf_counter() - t0, energy_model=energy_model)
+                              time.perf_counter() - t0, energy_model=energy_model, band=band)
 
-    def _nlp_limits(self) -> SolveRequest:
+    def _nlp_limits(self, band: TcpBand | None = None) -> SolveRequest:
         s, lim = self.settings, self.limits
         keep = 1.0 - s.constraint_margin
         vel = np.minimum(lim.velocity, lim.friction.valid_range()[:, 1])
         sm = self.smooth_limits
+        b = band or TcpBand()
+        # the process bounds with the same margin as the three-axis planner's
         return SolveRequest(0.0, 0.0, 1.0, s.min_theta_dot_rad_s, vel * keep,
-                            lim.torque * keep,
+                            lim.torque * keep, b.speed_max * keep,
+                            b.speed_min * (2.0 - keep), b.accel_max * keep, b.ramp_length,
                             jerk_limit=None if sm is None else sm.jerk * keep,
                             tcp_jerk_max=0.0 if sm is None else sm.tcp_jerk * keep)
 
@@ -530,7 +562,10 @@ class SixAxisPlanner:
                             s.play_rate_hz, s.path_tolerance_m,
                             np.radians(s.orientation_tolerance_deg),
                             smooth=self.smooth_limits if smooth else None,
-                            smooth_exempt=exempt, electrical=electrical if torque else None)
+                            smooth_exempt=exempt, electrical=electrical if torque else None,
+                            band=getattr(prob, 'band', None),
+                            rest=getattr(getattr(prob, 'transcription', None), 'boundary',
+                                         BOUNDARY_REST) == BOUNDARY_REST)
 
     # --- solves -----------------------------------------------------------------------------
     def _solve_checked(self, prob: SixAxisProblem, sreq: SolveRequest, duration: float,
@@ -547,8 +582,11 @@ class SixAxisPlanner:
             spent += res.stats.solve_time
             iters += res.stats.iterations
             if not res.stats.success or res.profile is None:
-                raise SixAxisPlanError(f'the optimiser found no solution ({res.stats.status}, '
-                                       f'{res.stats.iterations} iterations)')
+                with_band = (f' with the process constraints ({band_text(prob.band)})'
+                             if prob.band is not None else '')
+                raise SixAxisPlanError(f'the optimiser found no solution{with_band} '
+                                       f'({res.stats.status}, {res.stats.iterations} '
+                                       'iterations)')
             profile = res.profile
             for _ in range(2 if duration > 0 else 0):
                 profile = profile.scaled_in_time(duration / profile.duration)
@@ -556,6 +594,10 @@ class SixAxisPlanner:
             over_tau = chk.peak_torque - lim.torque
             over_v = chk.peak_speed - vel_lim
             smooth_fix = tighten_smooth(self.smooth_limits, sreq, chk)
+            try:
+                smooth_fix.update(tighten_band(sreq, prob.band, chk))
+            except PlanError as exc:
+                raise SixAxisPlanError(exc.message) from None
             limit_hit = np.any(over_tau > 0) or np.any(over_v > 0) or bool(smooth_fix)
             if not limit_hit or attempt == s.adapt_rounds:
                 return res, profile, traj, chk, notes + problems, spent, iters
@@ -572,7 +614,7 @@ class SixAxisPlanner:
         message is dense enough for the played tolerances and limits, not for the consistency
         rule (only a time-optimal plan that is the answer needs that: ``plan``)."""
         if 'time' not in prob.min_duration:
-            req = replace(self._nlp_limits(), duration=0.0, time_weight=1.0,
+            req = replace(self._nlp_limits(prob.band), duration=0.0, time_weight=1.0,
                           energy_weight=TIME_OBJECTIVE_ENERGY_WEIGHT)
             out = self._solve_checked(prob, req, 0.0, consistency=False)
             prob.min_duration['time'] = (out[1].duration, out)
@@ -597,7 +639,8 @@ class SixAxisPlanner:
                 raise SixAxisPlanError(f'duration {duration:.4f} s is shorter than the '
                                        f'time-optimal {t_min:.4f} s for this path, law and '
                                        'limits')
-            sreq = replace(self._nlp_limits(), duration=float(duration), time_weight=0.0,
+            sreq = replace(self._nlp_limits(prob.band), duration=float(duration),
+                           time_weight=0.0,
                            energy_weight=1.0)
             res, profile, traj, chk, notes, spent, iters = self._solve_checked(
                 prob, sreq, duration)
@@ -689,8 +732,10 @@ def place(planner: SixAxisPlanner, spec: dict, offsets, duration: float,
     points = []
     for k, d in enumerate(offsets):
         try:
-            path, law = task_from_spec(translated_spec(spec, d))
-            prob = planner.problem(path, law, grid_size, energy_model=energy_model)
+            moved = translated_spec(spec, d)
+            path, law = task_from_spec(moved)
+            prob = planner.problem(path, law, grid_size, energy_model=energy_model,
+                                   process=task_process(moved))
             plan = planner.plan(prob, 'energy', duration)
             e = plan.energy if energy_model == 'mechanical' else plan.electrical_energy
             pt = PlacementPoint(d.copy(), float(e), plan=plan)

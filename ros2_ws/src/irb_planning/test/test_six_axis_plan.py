@@ -331,3 +331,46 @@ def test_compass_refinement_of_a_placement_finds_the_minimum_inside_the_box(monk
         assert best.energy <= res.best.energy
         assert sap.on_box_edge(best.offset, lo, hi) == ([] if inside else [0])
         assert any(not np.isfinite(p.energy) for p in out.points)   # refusals kept
+
+
+def test_a_process_band_holds_on_six_axes_as_played(planned):
+    """A path file's process block (TCP speed band beyond 30 mm ramps, |TCP acceleration|) on
+    the six-axis planner: the plan keeps it as played by this test's own player (quintic per
+    joint at 2 kHz) and irb_description's link-chain FK (``SixAxisKinematics.fk``, not the
+    check's DH product), speeds and accelerations by central differences; a band the path
+    cannot keep at that duration is refused in one line naming it."""
+    from irb_planning.six_axis_plan import SixAxisPlanError, task_process
+    planner = planned[0]
+    band = dict(tcp_speed_min=0.15, tcp_speed_max=0.3, tcp_ramp_length=0.03,
+                tcp_accel_max=2.0)
+    spec = {**ARC, 'orientation': {'law': 'path_normal'}, 'process': band}
+    path, law = task_from_spec(spec)
+    assert task_process(spec) == band
+    prob = planner.problem(path, law, GRID, process=task_process(spec))
+    plan = planner.plan(prob, 'energy', DURATION)
+    tr = plan.trajectory
+    t, q, qd, qdd = (np.asarray(tr[k]) for k in ('t', 'q', 'qd', 'qdd'))
+    dt = 5e-4
+    ts = np.arange(int(round((t[-1] - t[0]) / dt)) + 1) * dt + t[0]
+    qs = np.stack([BPoly.from_derivatives(t, np.stack([q[:, i], qd[:, i], qdd[:, i]], 1),
+                                          orders=5)(ts) for i in range(6)], axis=1)
+    p = np.array([planner.kin.fk(x)[:3, 3] for x in qs])
+    v = np.linalg.norm(p[2:] - p[:-2], axis=1) / (2 * dt)
+    a = np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=1) / dt ** 2
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])[1:-1]
+    inside = (s >= band['tcp_ramp_length'] + 1e-3) & (s <= s[-1] - band['tcp_ramp_length']
+                                                       - 1e-3)
+    assert abs(s[-1] - path.length) < 1e-3
+    assert v.max() <= band['tcp_speed_max'] * (1 + 2e-3), v.max()
+    assert v[inside].min() >= band['tcp_speed_min'] * (1 - 2e-3), v[inside].min()
+    assert a.max() <= band['tcp_accel_max'] * (1 + 2e-3), a.max()
+    # the planner's own figures agree with this measurement
+    assert plan.check.tcp_speed_peak == pytest.approx(v.max(), rel=2e-3)
+    assert plan.check.tcp_accel_peak == pytest.approx(a.max(), rel=5e-3)
+    # the band costs energy: the same energy plan without it is not dearer
+    free = planned[3]
+    assert free.energy <= plan.energy * (1 + 1e-6)
+    # a floor the duration cannot keep: 0.3 m/s over a 0.4 m arc needs < 1.4 s, not 2 s
+    tight = task_process({'process': dict(band, tcp_speed_min=0.29)})
+    with pytest.raises(SixAxisPlanError, match='process constraints'):
+        planner.plan(planner.problem(path, law, GRID, process=tight), 'energy', DURATION)
