@@ -180,6 +180,7 @@ def task_from_spec(spec) -> tuple[PathBase, OrientationLaw]:
     if ORIENTATION_KEY not in spec:
         raise SixAxisPlanError("a six-axis path needs an 'orientation' block (law: fixed, "
                                'path_normal or slerp; irb_description doc/six_axis.md)')
+    task_process(spec)                   # a bad process block: one line, here
     geometry = {k: v for k, v in spec.items() if k not in (ORIENTATION_KEY, PROCESS_KEY)}
     try:
         path = path_from_spec(geometry)

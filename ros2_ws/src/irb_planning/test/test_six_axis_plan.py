@@ -109,8 +109,10 @@ def test_path_files_with_an_orientation_block():
     assert path.length > 0 and law.rotation(np.array([1.0])).shape == (1, 3, 3)
     with pytest.raises(SixAxisPlanError, match="needs an 'orientation' block"):
         task_from_spec(ARC)
-    with pytest.raises(SixAxisPlanError, match='process'):
-        task_from_spec({**spec, 'process': {'tcp_speed_max': 0.1}})
+    task_from_spec({**spec, 'process': {'tcp_speed_max': 0.1}})     # a band: taken
+    for bad in ({'tcp_speed_max': -0.1}, {'speed': 0.1}, [0.1]):
+        with pytest.raises(SixAxisPlanError, match='process'):
+            task_from_spec({**spec, 'process': bad})
     with pytest.raises(SixAxisPlanError, match='orientation law'):
         task_from_spec({**ARC, 'orientation': {'law': 'tangent'}})
 
