@@ -485,6 +485,11 @@ class SplinePath(PathBase):
     def length(self) -> float:
         return self._len
 
+    @property
+    def knots(self) -> np.ndarray:
+        """theta [rad] of the interior knots, where p''' jumps (p'' is continuous) (K,)."""
+        return self._sk[1:-1] / self._lam
+
     def _u_of(self, theta):
         sig = np.clip(np.asarray(theta, float).ravel() * self._lam, 0.0, self._len)
         u = np.interp(sig, self._ts, self._tu)
