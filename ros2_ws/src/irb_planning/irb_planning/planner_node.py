@@ -77,6 +77,9 @@ PARAMETERS = {
                      'check measured [-]'),
     'path_check_samples': ('path_check_samples', 'theta samples of the along-path joint check '
                            '[-]'),
+    'curvature_grid_share': ('curvature_grid_share', 'share of a spline path\'s grid nodes '
+                             'placed by its curvature, with a node at every knot (0 = the '
+                             'uniform grid) [-]'),
     'electrical_smoothing_w': ('electrical_smoothing_w', 'eps of the smoothed |.| in the '
                                'electrical NLP objective [W]'),
     'electrical_config': ('electrical_config', "electrical-model YAML ('' = irb_description "

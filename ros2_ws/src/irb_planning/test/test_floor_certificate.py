@@ -3,7 +3,11 @@ certificate (bench_floor_certificate.py, seed 1, cases 7 and 8) have motions wit
 limit (benchmarks/floor_witness.py found them independently). The causes, each tested here:
 the jerk rows' third derivatives (5-point stencils across spline knots), the TCP jerk rows
 (each component within J / sqrt 3) and the grid (13.5 mm intervals against an 11 mm bend).
-A refusal without a certificate says it is not proven and names a finer grid."""
+A refusal without a certificate says it is not proven and names a finer grid. Case 7 was
+refused at every uniform grid tried (200, 216, 400): theta_ddot linear per interval cannot
+follow kappa^2 v^3 through its 9 mm bend at the rows on the intervals' ends, and the spline's
+arc length was off by 3e-7 m; with the grid spaced by curvature, a node at every knot
+(planner.path_grid) and the arc length fixed it plans at grid 200."""
 import importlib.util
 from pathlib import Path
 from types import SimpleNamespace
@@ -11,7 +15,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from irb_planning.planner import Planner, PlannerSettings, jerk_path, request_path, theta_grid
+from irb_planning.planner import (Planner, PlannerSettings, jerk_path, path_grid, request_path,
+                                  theta_grid)
 from irb_planning.request import (ERROR_INFEASIBLE_DURATION, PlanError, PlanRequest,
                                   validate)
 from irb_planning.transcription import BOUNDARY_PERIODIC, Transcription
@@ -29,6 +34,15 @@ CASE8 = PlanRequest(path_type='spline', closed=True, boundary='periodic', object
                         [0.921588404281478, 0.0649037261056983, 0.6560200880097721],
                         [0.8915213906338776, 0.07397175651253617, 0.550444882019273]]),
                     tcp_speed_min=0.3, tcp_speed_max=1.2, tcp_accel_max=16.006857376297052,
+                    tcp_ramp_length=0.0)
+#: bench_floor_certificate.py --seed 1, case 7 (its request exactly)
+CASE7 = PlanRequest(path_type='spline', closed=True, boundary='periodic', objective='time',
+                    waypoints=np.array([
+                        [0.6046785388756878, 0.011030439009903664, 0.13548200907504104],
+                        [0.6681627903528091, 0.05364977364166311, 0.10342026685252996],
+                        [0.7586099329342988, 0.15134589842965523, 0.05114702060529008],
+                        [0.704715422114544, 0.24533764587370938, 0.05515024313789418]]),
+                    tcp_speed_min=0.3, tcp_speed_max=1.2, tcp_accel_max=19.980755190023935,
                     tcp_ramp_length=0.0)
 
 
@@ -77,12 +91,16 @@ def test_tcp_jerk_rows_keep_the_norm_within_the_limit(binormal):
     assert np.sqrt((corners ** 2).sum(axis=1) + r_b ** 2).max() <= J * (1 + 1e-12)
 
 
-def test_refusal_without_certificate_says_it_is_not_proven(planner):
-    """Case 8 at grid 60 (13.5 mm intervals against an 11.2 mm bend): the optimiser finds no
-    motion, certificate.py's strongest bound (29.5 m/s^3) is below the limit, so the refusal
-    says it is not proven, with the bound, the limit and a finer grid."""
+def test_refusal_without_certificate_says_it_is_not_proven(model, map_dir):
+    """Case 8 at the uniform grid 60 (curvature_grid_share 0; 13.5 mm intervals against an
+    11.2 mm bend): the optimiser finds no motion, certificate.py's strongest bound (29.5
+    m/s^3) is below the limit, so the refusal says it is not proven, with the bound, the
+    limit and a finer grid."""
+    uniform = Planner(model.copy(), PlannerSettings(
+        grid_size=60, limit_cost=False, curvature_grid_share=0.0, cache_size=1,
+        friction_map_dirs=(str(map_dir),)))
     with pytest.raises(PlanError) as err:
-        planner.plan(CASE8)
+        uniform.plan(CASE8)
     msg = err.value.message
     assert err.value.code == ERROR_INFEASIBLE_DURATION
     assert 'not proven: no certificate: the strongest TCP jerk bound of certificate.py is '\
@@ -91,12 +109,14 @@ def test_refusal_without_certificate_says_it_is_not_proven(planner):
     assert 'a finer grid_size (e.g. 214) may plan it' in msg
 
 
-def test_case_refused_before_plans_within_the_limits_as_played(model):
-    """Case 8 at grid 200 (refused before at every grid: the stencils and the TCP jerk box):
-    planned; its TCP jerk as played by quintic interpolation at 10 kHz (test/played.py,
-    forward kinematics, third difference) within the limit, its speed within the band."""
+@pytest.mark.parametrize('case', [CASE7, CASE8], ids=['case7', 'case8'])
+def test_case_refused_before_plans_within_the_limits_as_played(model, case):
+    """Cases 7 and 8 at grid 200 (refused before at every grid; 8: the stencils and the TCP
+    jerk box; 7: the uniform grid and the spline's arc length): planned; the TCP jerk as
+    played by quintic interpolation at 10 kHz (test/played.py, forward kinematics, third
+    difference) within the limit, the speed within the band."""
     pl = Planner(model.copy(), PlannerSettings(grid_size=200, cache_size=1, limit_cost=False))
-    res = pl.plan(CASE8)
+    res = pl.plan(case)
     tr = res.trajectory
     rate = 10000.0
     p = played.play(model, tr['t'], tr['q'], tr['qd'], tr['qdd'], rate=rate, stride=10 ** 9)
@@ -107,3 +127,23 @@ def test_case_refused_before_plans_within_the_limits_as_played(model):
     speed = np.linalg.norm(np.diff(x, axis=0), axis=1) * rate
     assert jerk.max() <= 100.0 * (1 + LIMIT_RTOL)
     assert speed.min() >= 0.3 * (1 - 1e-3) and speed.max() <= 1.2 * (1 + 1e-3)
+
+
+def test_spline_points_agree_with_their_derivative():
+    """SplinePath's arc length (Gauss-Legendre per table piece): p(theta) - p(theta') is the
+    integral of p' (Simpson, 64 pieces) within 1e-12 m over every 0.32 mm step of case 7's
+    spline (with one rule per knot interval: 1.7e-7 m next to its 9 mm bend, the points of
+    a plan then disagreed with their velocities); and path_grid puts a node on every knot."""
+    path = request_path(validate(CASE7, 200))
+    theta = np.linspace(0.0, 2 * np.pi, 2001)
+    x = np.linspace(0.0, 1.0, 65)
+    w = np.ones(65)
+    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+    s = theta[:-1, None] + np.diff(theta)[:, None] * x[None, :]
+    d = path.d_point(s.ravel()).reshape(s.shape + (3,))
+    integral = np.diff(theta)[:, None] / 64 / 3 * np.einsum('j,kjx->kx', w, d)
+    gap = np.linalg.norm(np.diff(path.point(theta), axis=0) - integral, axis=1)
+    assert gap.max() <= 1e-12
+    grid = path_grid(200, path, PlannerSettings().curvature_grid_share)
+    assert grid.size == 200 and np.all(np.diff(grid) > 0)
+    assert np.all(np.isin(path.knots, grid))
