@@ -25,6 +25,7 @@ def main():
     ap.add_argument('--model', choices=('plant', 'nominal'), default='plant')
     ap.add_argument('--cycles', type=int, default=30)
     ap.add_argument('--work', default='/tmp/bench_cycle_run')
+    ap.add_argument('--out', default='', help="results/<out>.json ('' = cycle_run_<model>)")
     ap.add_argument('--jobs', type=int, default=2)
     ap.add_argument('--sim-mode', default='paced')
     ap.add_argument('--limit-scaling', type=float, default=0.6,
@@ -83,7 +84,7 @@ def main():
            'per_cycle_measured_j': [c['measured_j'] for c in res['cycles']],
            'plan_predictions': res['plan_predictions'], 'summary': s}
     (HERE / 'results').mkdir(exist_ok=True)
-    f = HERE / 'results' / f'cycle_run_{a.model}.json'
+    f = HERE / 'results' / f'{a.out or "cycle_run_" + a.model}.json'
     f.write_text(json.dumps(out, indent=1, default=float))
     print(json.dumps({k: out[k] for k in ('model', 'exit_code', 'run_wall_s', 'load_after')}
                      | {'summary': {k: s.get(k) for k in (
