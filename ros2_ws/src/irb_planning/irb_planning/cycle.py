@@ -64,6 +64,13 @@ FRONT_WARM_WINDOW = 0.3
 #: rectangle's band by <= 0.3 %; PlannerSettings.resolve_mu_init): 15-18 iterations instead
 #: of 28-45 at the warm solver's 1e-4, the same energies
 FRONT_RESOLVE_MU_INIT = 1e-6
+#: MUMPS's permuting scaling (IPOPT's mumps_permuting_scaling, ICNTL(6); PlannerSettings.
+#: mumps_permuting_scaling) for the fronts: 0 = none. IPOPT's default 7 (automatic) spent
+#: about half of every iteration on it for these KKT systems (N = 100, ~1400 variables,
+#: ~4300 rows): cycle_ten's 41 solves took 2266 iterations at 31 ms, 0 made them 1807
+#: iterations at 15 ms (one process under load; benchmarks/RESULTS.md, cyc30) with the same
+#: front energies (test_cycle_fronts.py compares them with IPOPT's default)
+FRONT_MUMPS_PERMUTING_SCALING = 0
 
 
 class CycleError(ValueError):
@@ -645,6 +652,9 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                                   s.tcp_jerk_limit_m_s3, list(s.torque_rate_limit_nm_s)],
                        # pdplus's plan gate: its points are re-planned until it accepts them
                        'gate': [GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION],
+                       # the linear solver's scaling: another stopping point, possibly
+                       # another local optimum (the same energies in cycle_ten, to ~1e-7)
+                       'mumps_ps': s.mumps_permuting_scaling,
                        # only when set: the caches of plans at the full limits stay valid
                        **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
                       sort_keys=True, default=str)
@@ -898,13 +908,15 @@ def front_settings(spec: CycleSpec, **overrides):
     """PlannerSettings for a cycle's fronts: the spec's grid (200 if unset), no
     cost-of-the-limits solve (the fronts' many plans need no such figure), warm starts along
     the front (each point from its neighbour, FRONT_WARM_ITERATIONS, FRONT_WARM_WINDOW; the
-    first from the time-optimal plan); ``overrides``: other PlannerSettings fields. The
-    warm starts change where IPOPT starts, not the problem: test_cycle_fronts.py compares
-    such a front with cold solves."""
+    first from the time-optimal plan), MUMPS without permuting scaling
+    (FRONT_MUMPS_PERMUTING_SCALING); ``overrides``: other PlannerSettings fields. The warm
+    starts and the scaling change where and how IPOPT walks, not the problem:
+    test_cycle_fronts.py compares such a front with cold solves at IPOPT's defaults."""
     from .planner import PlannerSettings
     kw = dict(grid_size=spec.grid_size or 200, limit_cost=False,
               warm_max_iterations=FRONT_WARM_ITERATIONS, warm_window=FRONT_WARM_WINDOW,
-              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT)
+              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT,
+              mumps_permuting_scaling=FRONT_MUMPS_PERMUTING_SCALING)
     kw.update(overrides)
     return PlannerSettings(**kw)
 
