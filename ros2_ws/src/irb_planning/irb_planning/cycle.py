@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -612,13 +613,17 @@ def _point_record(result, bus: str, electrical) -> dict:
 class Front:
     """A motion's energy-duration front: points {duration: record}, the time-optimal plan
     ('fastest', baseline A), durations refused (with the reason), CPU time [s] its process
-    spent on it in this call (planning; ~0 from the cache)."""
+    spent on it in this call (planning; ~0 from the cache), the id of that process and its
+    CPU time [s] since it started, at the front's end (imports and planner included: the
+    largest per process is what that process cost)."""
 
     name: str
     fastest: dict
     points: dict
     refused: dict = field(default_factory=dict)
     cpu_s: float = 0.0
+    pid: int = 0
+    process_cpu_s: float = 0.0
 
     def item(self) -> MotionItem:
         d = sorted(self.points)
@@ -750,7 +755,8 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
         raise CycleError(f'motion {op.name}: every front duration was refused '
                          f'({"; ".join(sorted(set(cache["refused"].values())))[:200]})')
     return Front(op.name, fastest, pts, {float(k): v for k, v in cache['refused'].items()
-                                         if k in wanted}, time.process_time() - cpu0)
+                                         if k in wanted}, time.process_time() - cpu0,
+                 os.getpid(), time.process_time())
 
 
 # --- the whole cycle ----------------------------------------------------------------------
