@@ -658,7 +658,7 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                        # pdplus's plan gate: its points are re-planned until it accepts them
                        'gate': [GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION],
                        # the linear solver's scaling: another stopping point, possibly
-                       # another local optimum (the same energies in cycle_ten, to ~1e-7)
+                       # another local optimum (cycle_ten: the same energies to 3.1e-7)
                        'mumps_ps': s.mumps_permuting_scaling,
                        # only when set: the caches of plans at the full limits stay valid
                        **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
