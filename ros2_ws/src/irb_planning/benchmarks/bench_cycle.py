@@ -49,22 +49,25 @@ def load_text() -> str:
         return 'n/a'
 
 
-def make_planner(spec):
+def make_planner(spec, **overrides):
     from irb_planning.cycle import front_settings
     from irb_planning.planner import Planner
     return Planner(settings=front_settings(spec, play_rate_hz=1000.0,
-                                           evaluation_rate_hz=1000.0))
+                                           evaluation_rate_hz=1000.0, **overrides))
 
 
 def section_ten(cache_root: Path, jobs: int, cold: bool, cold_runs: int = 1,
-                front_points: int = 0) -> dict:
+                front_points: int = 0, mumps_permuting_scaling: int | None = None) -> dict:
     from dataclasses import replace
     from irb_planning.cycle import load_cycle, plan_cycle
     spec = load_cycle(TEN)
     if front_points:
         spec = replace(spec, front_points=front_points)
+    over = ({} if mumps_permuting_scaling is None
+            else {'mumps_permuting_scaling': mumps_permuting_scaling})
     out = {'operations': len(spec.operations), 'motions': len(spec.motions), 'jobs': jobs,
-           'takt_s': spec.takt_s, 'front_points': spec.front_points}
+           'takt_s': spec.takt_s, 'front_points': spec.front_points,
+           'mumps_permuting_scaling': make_planner(spec, **over).settings.mumps_permuting_scaling}
     cache = cache_root / 'ten'
     runs = []
     for k in range(cold_runs if cold else 0):
@@ -75,15 +78,27 @@ def section_ten(cache_root: Path, jobs: int, cold: bool, cold_runs: int = 1,
         load0 = load_text()
         t0 = time.perf_counter()
         cpu0 = time.process_time()
-        plan = plan_cycle(spec, make_planner(spec), cache_dir=cdir,
+        plan = plan_cycle(spec, make_planner(spec, **over), cache_dir=cdir,
                           progress=lambda s: print(s, file=sys.stderr, flush=True), jobs=j)
         wall = time.perf_counter() - t0
+        procs = {}              # per planning process: its fronts' CPU, its whole CPU
+        for f in plan.fronts.values():
+            pr = procs.setdefault(f.pid, {'fronts': [], 'fronts_cpu_s': 0.0,
+                                          'process_cpu_s': 0.0})
+            pr['fronts'].append(f.name)
+            pr['fronts_cpu_s'] += f.cpu_s
+            pr['process_cpu_s'] = max(pr['process_cpu_s'], f.process_cpu_s)
         # CPU: this process, and the fronts' planning in whichever process planned them
         # (the machine is shared: CPU seconds are the figure load does not inflate)
         out[tag] = {'wall_s': wall, 'front_s': plan.front_time_s,
                     'cpu_main_s': time.process_time() - cpu0,
                     'cpu_fronts_s': float(sum(f.cpu_s for f in plan.fronts.values())),
                     'front_cpu_s': {k: f.cpu_s for k, f in plan.fronts.items()},
+                    # the busier process's CPU bounds the wall on 2 free cores (with --jobs 1
+                    # it is this process, started before the clock: its process CPU is not
+                    # the run's)
+                    'processes': list(procs.values()),
+                    'busier_process_cpu_s': max(p['process_cpu_s'] for p in procs.values()),
                     'dp_s': plan.solution.solve_time_s, 'load_before': load0,
                     'load_after': load_text(), 'jobs': j, 'energy_j': plan.solution.total_j,
                     'gap_percent': 100 * plan.solution.gap_rel,
@@ -113,6 +128,9 @@ def main(argv=None):
                    help='ten: cold runs, each with an empty cache (median reported)')
     p.add_argument('--front-points', type=int, default=0,
                    help="ten: front points per motion instead of cycle_ten.yaml's")
+    p.add_argument('--mumps-permuting-scaling', type=int, default=None,
+                   help="ten: IPOPT's mumps_permuting_scaling for the fronts instead of "
+                        "cycle.FRONT_MUMPS_PERMUTING_SCALING (-1: IPOPT's default, for A/B)")
     p.add_argument('--ten-key', default='ten',
                    help='ten: the key of results/cycle.json its figures go to (another key '
                         'keeps the last ones beside them)')
@@ -147,7 +165,7 @@ def main(argv=None):
             plot_tornado(result['tornado'], RESULTS / 'cycle_tornado.png')
     if 'ten' in a.section:
         result[a.ten_key] = section_ten(cache, a.jobs, not a.no_cold, a.cold_runs,
-                                     a.front_points)
+                                        a.front_points, a.mumps_permuting_scaling)
     result['load_end'] = load_text()
     old = RESULTS / 'cycle.json'          # keep what this run did not measure again
     if old.is_file():

@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,6 +65,13 @@ FRONT_WARM_WINDOW = 0.3
 #: rectangle's band by <= 0.3 %; PlannerSettings.resolve_mu_init): 15-18 iterations instead
 #: of 28-45 at the warm solver's 1e-4, the same energies
 FRONT_RESOLVE_MU_INIT = 1e-6
+#: MUMPS's permuting scaling (IPOPT's mumps_permuting_scaling, ICNTL(6); PlannerSettings.
+#: mumps_permuting_scaling) for the fronts: 0 = none. IPOPT's default 7 (automatic) spent
+#: about half of every iteration on it for these KKT systems (N = 100, ~1400 variables,
+#: ~4300 rows): cycle_ten's 41 solves took 2266 iterations at 31 ms, 0 made them 1807
+#: iterations at 15 ms (one process under load; benchmarks/RESULTS.md, cyc30) with the same
+#: front energies (test_cycle_fronts.py compares them with IPOPT's default)
+FRONT_MUMPS_PERMUTING_SCALING = 0
 
 
 class CycleError(ValueError):
@@ -605,13 +613,17 @@ def _point_record(result, bus: str, electrical) -> dict:
 class Front:
     """A motion's energy-duration front: points {duration: record}, the time-optimal plan
     ('fastest', baseline A), durations refused (with the reason), CPU time [s] its process
-    spent on it in this call (planning; ~0 from the cache)."""
+    spent on it in this call (planning; ~0 from the cache), the id of that process and its
+    CPU time [s] since it started, at the front's end (imports and planner included: the
+    largest per process is what that process cost)."""
 
     name: str
     fastest: dict
     points: dict
     refused: dict = field(default_factory=dict)
     cpu_s: float = 0.0
+    pid: int = 0
+    process_cpu_s: float = 0.0
 
     def item(self) -> MotionItem:
         d = sorted(self.points)
@@ -645,6 +657,9 @@ def _cache_key(planner, op: Operation, spec: CycleSpec, energy_model: str) -> st
                                   s.tcp_jerk_limit_m_s3, list(s.torque_rate_limit_nm_s)],
                        # pdplus's plan gate: its points are re-planned until it accepts them
                        'gate': [GATE_MAX_ACCELERATION_RAD_S2, GATE_TORQUE_FRACTION],
+                       # the linear solver's scaling: another stopping point, possibly
+                       # another local optimum (cycle_ten: the same energies to 3.1e-7)
+                       'mumps_ps': s.mumps_permuting_scaling,
                        # only when set: the caches of plans at the full limits stay valid
                        **({'limits': spec.limit_scaling} if spec.limit_scaling else {})},
                       sort_keys=True, default=str)
@@ -740,7 +755,8 @@ def compute_front(planner, op: Operation, spec: CycleSpec, energy_model: str,
         raise CycleError(f'motion {op.name}: every front duration was refused '
                          f'({"; ".join(sorted(set(cache["refused"].values())))[:200]})')
     return Front(op.name, fastest, pts, {float(k): v for k, v in cache['refused'].items()
-                                         if k in wanted}, time.process_time() - cpu0)
+                                         if k in wanted}, time.process_time() - cpu0,
+                 os.getpid(), time.process_time())
 
 
 # --- the whole cycle ----------------------------------------------------------------------
@@ -898,13 +914,15 @@ def front_settings(spec: CycleSpec, **overrides):
     """PlannerSettings for a cycle's fronts: the spec's grid (200 if unset), no
     cost-of-the-limits solve (the fronts' many plans need no such figure), warm starts along
     the front (each point from its neighbour, FRONT_WARM_ITERATIONS, FRONT_WARM_WINDOW; the
-    first from the time-optimal plan); ``overrides``: other PlannerSettings fields. The
-    warm starts change where IPOPT starts, not the problem: test_cycle_fronts.py compares
-    such a front with cold solves."""
+    first from the time-optimal plan), MUMPS without permuting scaling
+    (FRONT_MUMPS_PERMUTING_SCALING); ``overrides``: other PlannerSettings fields. The warm
+    starts and the scaling change where and how IPOPT walks, not the problem:
+    test_cycle_fronts.py compares such a front with cold solves at IPOPT's defaults."""
     from .planner import PlannerSettings
     kw = dict(grid_size=spec.grid_size or 200, limit_cost=False,
               warm_max_iterations=FRONT_WARM_ITERATIONS, warm_window=FRONT_WARM_WINDOW,
-              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT)
+              warm_from_time_optimal=True, resolve_mu_init=FRONT_RESOLVE_MU_INIT,
+              mumps_permuting_scaling=FRONT_MUMPS_PERMUTING_SCALING)
     kw.update(overrides)
     return PlannerSettings(**kw)
 

@@ -95,6 +95,9 @@ class PlannerSettings:
     warm_from_time_optimal: bool = False
     # > 0: IPOPT's initial barrier for a warm re-solve at the same duration (0: 1e-4)
     resolve_mu_init: float = 0.0
+    # >= 0: IPOPT's mumps_permuting_scaling for every solver (MUMPS ICNTL(6)); -1: IPOPT's
+    # default (7, automatic). The cycle's fronts set 0 (cycle.FRONT_MUMPS_PERMUTING_SCALING)
+    mumps_permuting_scaling: int = -1
     trapezoid_ramp_fraction: float = 0.1  # of the duration, each ramp
     evaluation_rate_hz: float = 1000.0
     # the independent check plays the message by quintic interpolation at this rate (and at
@@ -349,7 +352,8 @@ class Planner:
                            band_rows=band_rows, jerk=jerk,
                            warm_max_iter=s.warm_max_iterations, warm_window=s.warm_window,
                            warm_from_time_optimal=s.warm_from_time_optimal,
-                           resolve_mu_init=s.resolve_mu_init)
+                           resolve_mu_init=s.resolve_mu_init,
+                           mumps_permuting_scaling=s.mumps_permuting_scaling)
         entry = _Entry(nodes, mids, tr)
         entry.friction = friction
         entry.friction_map = fm

@@ -216,7 +216,7 @@ class Transcription:
                  accel_rows: bool = False, band_rows: bool = False,
                  jerk: JerkPath | None = None, warm_max_iter: int = 40,
                  warm_window: float = 0.2, warm_from_time_optimal: bool = False,
-                 resolve_mu_init: float = 0.0):
+                 resolve_mu_init: float = 0.0, mumps_permuting_scaling: int = -1):
         """``sides``: optional (node indices (S,), PathDynamics at them): the other side of
         nodes where the path's curvature jumps (a polyline's piece ends; Phi' is continuous
         there, Phi'' is not). Their torques get rows too, so the limits hold on both sides.
@@ -231,7 +231,9 @@ class Transcription:
         played at its duration (``_time_optimal_start``); ``resolve_mu_init`` > 0: IPOPT's
         initial barrier parameter for a warm re-solve at the last solve's own duration (the
         planner's re-solve after its check tightened a limit or a process bound by < 1 %;
-        0: the warm solver's 1e-4)."""
+        0: the warm solver's 1e-4); ``mumps_permuting_scaling`` >= 0: IPOPT's option of that
+        name for every solver of this problem (MUMPS ICNTL(6); -1: IPOPT's default, 7 =
+        automatic choice; cycle.FRONT_MUMPS_PERMUTING_SCALING)."""
         if boundary not in BOUNDARIES:
             raise ValueError(f'boundary must be one of {BOUNDARIES}, not {boundary!r}')
         self.nodes, self.mids, self.boundary = nodes, mids, boundary
@@ -424,8 +426,10 @@ class Transcription:
 
         # --- solver ------------------------------------------------------------------------
         nlp = {'x': x, 'p': p, 'f': f, 'g': g}
+        self._ipopt_extra = ({'mumps_permuting_scaling': int(mumps_permuting_scaling)}
+                             if mumps_permuting_scaling >= 0 else {})
         self._solver_cold = ca.nlpsol('transcription', 'ipopt', nlp,
-                                      ipopt_options(max_iter, tol))
+                                      ipopt_options(max_iter, tol, extra=self._ipopt_extra))
         # warm solver (capped iterations, then a cold solve takes over): built on the first
         # request that can use it; each IPOPT instance holds ~25-40 MiB at N = 200
         self._nlp, self._max_iter, self._tol = nlp, max_iter, tol
@@ -801,12 +805,13 @@ class Transcription:
                     self._solver_resolve = self._sibling_solver(
                         'transcription_resolve',
                         ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
-                                      warm=True, extra={'mu_init': self._resolve_mu_init}))
+                                      warm=True, extra={'mu_init': self._resolve_mu_init,
+                                                        **self._ipopt_extra}))
                 if not resolve and self._solver_warm is None:
                     self._solver_warm = self._sibling_solver(
                         'transcription_warm',
                         ipopt_options(min(self._max_iter, self._warm_max_iter), self._tol,
-                                      warm=True))
+                                      warm=True, extra=self._ipopt_extra))
                 solver = self._solver_resolve if resolve else self._solver_warm
                 x0, lam_x, lam_g = warm_point
                 sol = solver(x0=np.clip(x0, lbx, ubx), p=p, lbx=lbx, ubx=ubx,
@@ -831,7 +836,7 @@ class Transcription:
                 fallback = self._sibling_solver(
                     'transcription_adaptive',
                     ipopt_options(self._max_iter, self._tol,
-                                  extra={'mu_strategy': 'adaptive'}))
+                                  extra={'mu_strategy': 'adaptive', **self._ipopt_extra}))
                 x0 = (self.initial_guess(req, lbx, ubx) if start is None
                       else np.clip(start, lbx, ubx))
                 sol = fallback(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)

@@ -2,14 +2,15 @@
 slowly: the warm solver that reuses the cold solver's derivative functions is the same
 solver (bit for bit), and a front planned as cycle.compute_front does (one planner, each
 point warm-started from its neighbour, the warm cap of the fronts) has the energies of the
-same points planned cold, each by a fresh planner without warm starts."""
+same points planned cold, each by a fresh planner without warm starts and with IPOPT's
+default linear-solver scaling (the fronts turn MUMPS's permuting scaling off)."""
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from irb_planning.cycle import (FRONT_WARM_ITERATIONS, Operation, compute_front,
-                                front_settings, parse_cycle)
+from irb_planning.cycle import (FRONT_MUMPS_PERMUTING_SCALING, FRONT_WARM_ITERATIONS, Operation,
+                                compute_front, front_settings, parse_cycle)
 from irb_planning.planner import Planner, request_path
 from irb_planning.problem import ipopt_options
 from irb_planning.request import validate
@@ -58,16 +59,21 @@ def test_the_sibling_warm_solver_is_the_same_solver(spec, model):
 def test_a_warm_started_front_equals_cold_solves(spec, model, tmp_path):
     planner = Planner(model.copy(), front_settings(spec))
     assert planner.settings.warm_max_iterations == FRONT_WARM_ITERATIONS
+    assert planner.settings.mumps_permuting_scaling == FRONT_MUMPS_PERMUTING_SCALING >= 0
     op = spec.motions[0]
     lines = []
     front = compute_front(planner, op, spec, 'electrical_shared', tmp_path, lines.append)
     assert sorted(front.points) == list(DURATIONS)
     tr = next(iter(planner._cache.values())).transcription
     assert tr._solver_warm is not None          # the front did use warm starts
+    assert tr._ipopt_extra == {'mumps_permuting_scaling': FRONT_MUMPS_PERMUTING_SCALING}
     # oracle: a planner without warm starts (every solve cold, from the transcription's own
-    # initial guess; the same time-optimal solve first, as every plan has)
-    cold = Planner(model.copy(), front_settings(spec, warm_start=False))
+    # initial guess; the same time-optimal solve first, as every plan has) and with IPOPT's
+    # default MUMPS scaling (-1), as single plans have
+    cold = Planner(model.copy(), front_settings(spec, warm_start=False,
+                                                mumps_permuting_scaling=-1))
     ref = compute_front(cold, op, spec, 'electrical_shared', None, print)
+    assert next(iter(cold._cache.values())).transcription._ipopt_extra == {}
     rel = []
     for d in DURATIONS:
         e, e_ref = front.points[d]['energy_j'], ref.points[d]['energy_j']
