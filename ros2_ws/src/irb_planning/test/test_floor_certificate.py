@@ -147,3 +147,26 @@ def test_spline_points_agree_with_their_derivative():
     grid = path_grid(200, path, PlannerSettings().curvature_grid_share)
     assert grid.size == 200 and np.all(np.diff(grid) > 0)
     assert np.all(np.isin(path.knots, grid))
+
+
+def test_a_refusal_with_projection_symptoms_names_the_sharpest_bend():
+    """The closed spline of bench_smooth --seed 31 (two waypoints 10.4 mm apart) whose
+    periodic time-optimal plan was refused with only the check's symptoms: its sharpest bend
+    (1.85 mm) is named; other refusals are left as they are; a circle's bend is its radius."""
+    from irb_planning.planner import _tight_bend_hint, sharpest_bend
+    from irb_planning.request import ERROR_SOLVER, PlanError
+    way = np.array([[0.57738276, -0.26699967, 0.44288097], [0.76253304, -0.23166506, 0.54776359],
+                    [0.76408912, -0.22259135, 0.54289186], [0.51455009, -0.32050884, 0.43450325]])
+    path = request_path(PlanRequest(path_type='spline', waypoints=way, closed=True,
+                                    boundary='periodic'))
+    radius, where = sharpest_bend(path)
+    assert 1.8e-3 < radius < 1.9e-3 and 0 < where < path.length
+    exc = PlanError(ERROR_SOLVER, 'the time-optimal profile fails the checks after 3 tightened '
+                    're-solves: point 635 (t = 0.683 s) is 0.035 mm off the path')
+    hinted = _tight_bend_hint(exc, path)
+    assert hinted.code == ERROR_SOLVER and hinted.message.startswith(exc.message)
+    assert 'radius of 1.85 mm' in hinted.message
+    other = PlanError(ERROR_SOLVER, 'the optimiser found no solution')
+    assert _tight_bend_hint(other, path) is other
+    circle = request_path(PlanRequest(center=np.array([0.6, 0.0, 0.13]), radius=0.15))
+    assert sharpest_bend(circle)[0] == pytest.approx(0.15, rel=1e-6)
