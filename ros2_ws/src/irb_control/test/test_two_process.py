@@ -62,9 +62,14 @@ def enable_when_ready(ex, enable, timeout_s: float = 30.0):
     from std_srvs.srv import Trigger
     deadline = time.monotonic() + timeout_s
     while True:
-        fut = enable.call_async(Trigger.Request())
-        ex.spin_until_future_complete(fut, timeout_sec=30.0)
-        assert fut.done(), 'no answer from ~/enable'
+        # a call unanswered for 5 s is sent again: a response can be lost while the server's
+        # reply writer has not matched this client yet (a fresh-clone CI: no answer in 120 s)
+        for _ in range(6):
+            fut = enable.call_async(Trigger.Request())
+            ex.spin_until_future_complete(fut, timeout_sec=5.0)
+            if fut.done():
+                break
+        assert fut.done(), 'no answer from ~/enable in 6 calls of 5 s'
         res = fut.result()
         if res.success or 'no axis status' not in res.message or time.monotonic() > deadline:
             return res
