@@ -748,7 +748,6 @@ def place(planner: SixAxisPlanner, spec: dict, offsets, duration: float,
     return SixAxisPlacement(points, energy_model, float(duration), int(grid_size))
 
 
-
 def refine_placement(planner: SixAxisPlanner, spec: dict, result: SixAxisPlacement, lo, hi,
                      step, min_step: float, progress=None) -> SixAxisPlacement:
     """Compass search from ``result``'s best offset, inside the box [lo, hi] (3,) [m]: plan
