@@ -57,22 +57,48 @@ class PathBase:
         return th, self.point(th)
 
     def theta_of(self, p: np.ndarray) -> np.ndarray:
-        """theta in [0, 2 pi] of the nearest path point to each of p (..., 3) [m]: the
-        nearest point of a dense table (scipy KD-tree), then Newton steps on
-        (p(theta) - x) . p'(theta) = 0 inside the two table intervals around it, all points
-        at once (on a closed path also from the other end of the table)."""
+        """theta in [0, 2 pi] of the nearest path point to each of p (..., 3) [m]: Newton
+        steps on (p(theta) - x) . p'(theta) = 0 inside the two table intervals around the
+        nearest point of a dense table (scipy KD-tree), and around every other table point
+        that may neighbour the true nearest point (within d_1 + h / 2 of x: d_1 the nearest
+        table distance, h the longest table chord), the nearest result kept: where the path
+        passes close by itself (two legs of a closed spline 0.19 mm apart) a point of one
+        leg is not put on the other. All points at once; on a closed path table point 0 is
+        the last one too."""
         p = np.asarray(p, float)
         flat = p.reshape(-1, 3)
-        th, tree = self._table()
-        _, j = tree.query(flat)
+        th, tree, h = self._table()
+        last = th.size - 1
+        k = min(8, th.size)
+        dist, idx = tree.query(flat, k=k)
+        dist, idx = dist.reshape(-1, k), idx.reshape(-1, k)
+        reach = dist[:, 0] + 0.5 * h * (1 + 1e-9)
+        j = idx[:, 0]
         out = _newton(self, flat, th, j)
+        best = np.linalg.norm(self.point(out) - flat, axis=1)
+        rows, cand = [], []
+        for c in range(1, k):
+            r = np.flatnonzero((dist[:, c] <= reach) & (np.abs(idx[:, c] - j) > 1))
+            rows.append(r)
+            cand.append(idx[r, c])
+        if self.closed:          # point n is point 0: the other end's interval too
+            r = np.flatnonzero((j == 0) | (j == last))
+            rows.append(r)
+            cand.append(np.where(j[r] == 0, last, 0))
+        crowded = np.flatnonzero(dist[:, -1] <= reach) if k <= last else np.zeros(0, int)
+        if crowded.size:         # the k nearest all within reach: every table point in it
+            found = tree.query_ball_point(flat[crowded], reach[crowded])
+            rows.append(np.repeat(crowded, [len(f) for f in found]))
+            cand.append(np.concatenate([np.asarray(f, int) for f in found]))
+        r, c = np.concatenate(rows), np.concatenate(cand)
+        if r.size:
+            tc = _newton(self, flat[r], th, c)
+            dc = np.linalg.norm(self.point(tc) - flat[r], axis=1)
+            order = np.lexsort((dc, r))              # per point, its nearest result first
+            first = order[np.r_[True, r[order][1:] != r[order][:-1]]]
+            better = dc[first] < best[r[first]]
+            out[r[first][better]] = tc[first][better]
         if self.closed:
-            last = th.size - 1
-            alt = np.where(j == 0, last, np.where(j == last, 0, j))
-            t2 = _newton(self, flat, th, alt)
-            d1 = np.linalg.norm(self.point(out) - flat, axis=1)
-            d2 = np.linalg.norm(self.point(t2) - flat, axis=1)
-            out = np.where(d2 < d1, t2, out)
             out = np.where(out >= TWO_PI, out - TWO_PI, out)
         return out.reshape(p.shape[:-1])
 
@@ -86,7 +112,8 @@ class PathBase:
         if cache is None:
             from scipy.spatial import cKDTree
             th, pts = self.table(1e-3)
-            cache = (th, cKDTree(pts))
+            cache = (th, cKDTree(pts), float(np.linalg.norm(np.diff(pts, axis=0),
+                                                            axis=1).max()))
             object.__setattr__(self, '_table_cache', cache)
         return cache
 

@@ -249,3 +249,26 @@ def test_a_path_file_that_is_not_yaml_names_line_and_column(tmp_path):
     f.write_text('type: line\nwaypoints: [[0.5, 0, 0.3]\n  bad: x\n')
     with pytest.raises(ValueError, match=r'bad.yaml is not YAML: .* at line 3, column 3$'):
         load_path_file(f)
+
+
+def test_theta_of_on_a_closed_spline_whose_legs_cross():
+    """bench_smooth --seed 31's closed spline: its legs cross (68 and 413 mm along it). Its
+    own points are at distance 0 and at their own theta, and points 1-3 mm off it are as far
+    as a brute-force search over 200001 path points says (3.2 um apart: it overestimates by
+    at most 7e-9 m at 0.19 mm; before, a point of one leg could be put on the other: 0.19
+    mm where it was on the path)."""
+    way = [[0.57738276, -0.26699967, 0.44288097], [0.76253304, -0.23166506, 0.54776359],
+           [0.76408912, -0.22259135, 0.54289186], [0.51455009, -0.32050884, 0.43450325]]
+    sp = SplinePath(way, closed=True)
+    th = np.linspace(0.0, 2 * np.pi, 8001)[:-1]
+    p = sp.point(th)
+    assert sp.distance(p).max() < 1e-12
+    got = sp.theta_of(p)
+    assert np.abs((got - th + np.pi) % (2 * np.pi) - np.pi).max() < 1e-9
+    rng = np.random.default_rng(3)
+    off = p[::16] + rng.normal(0.0, 1.5e-3, (th[::16].size, 3))
+    fine = sp.point(np.linspace(0.0, 2 * np.pi, 200001))
+    from scipy.spatial import cKDTree
+    brute, _ = cKDTree(fine).query(off)
+    got = sp.distance(off)
+    assert np.all(got <= brute + 1e-12) and np.all(brute - got <= 1e-8)

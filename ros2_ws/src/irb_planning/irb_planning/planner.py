@@ -661,7 +661,7 @@ class Planner:
                 entry, base, checked, check, band,
                 far=req.duration if req.objective != OBJECTIVE_TIME else 0.0)
         except PlanError as exc:
-            raise self._certified(_band_error(_tight_bend_hint(exc, path), band, 'at all'),
+            raise self._certified(_band_error(exc, band, 'at all'),
                                   req, path, band, checked, 'at all') from None
         if req.duration > 0 and req.duration < t_min * (1 - 1e-9):
             raise PlanError(ERROR_INFEASIBLE_DURATION,
@@ -1052,32 +1052,6 @@ def check_band_fits(req: PlanRequest, path: PathBase, entry: _Entry, t_max: floa
                f'{need[k, i]:.3f} rad/s {sig[k] * 1e3:.0f} mm along the path, above its '
                f'speed limit {velocity_limit[i]:.3f} rad/s (by '
                f'{100 * (ratio[k, i] - 1):.1f} %)')
-
-
-def sharpest_bend(path: PathBase, samples: int = 20001) -> tuple[float, float]:
-    """(smallest bend radius [m], arc length [m] where) of ``path``, from its curvature at
-    ``samples`` values of theta (inf where the path is straight)."""
-    th = np.linspace(0.0, 2 * np.pi, samples)
-    kappa = curvature(path.d_point(th), path.dd_point(th))
-    k = int(np.argmax(kappa))
-    if not kappa[k] > 0:
-        return float('inf'), 0.0
-    return float(1.0 / kappa[k]), float(th[k] / (2 * np.pi) * path.length)
-
-
-def _tight_bend_hint(exc: PlanError, path: PathBase) -> PlanError:
-    """``exc`` with the path's sharpest bend named where the check's symptoms are those of a
-    point projected onto the wrong side of it (points off the path, not in order): a closed
-    spline of bench_smooth (seed 31) with a 1.85 mm bend was refused with only those
-    symptoms (benchmarks/RESULTS.md)."""
-    if not ('off the path' in exc.message or 'do not run once along the path' in exc.message):
-        return exc
-    radius, where = sharpest_bend(path)
-    return PlanError(exc.code, exc.message + f'; the path bends with a radius of '
-                     f'{radius * 1e3:.2f} mm {where * 1e3:.0f} mm along it: so sharp a bend '
-                     'can make a point a few hundredths of a mm off the path project onto its '
-                     'other side (the points then seem out of order); widen the bend '
-                     '(waypoints further apart)')
 
 
 def tighten_band(sreq: SolveRequest, band: TcpBand | None, ver: Verification) -> dict:

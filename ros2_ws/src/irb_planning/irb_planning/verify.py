@@ -92,6 +92,7 @@ class PathCurve:
         self._tree = cKDTree(table)
         self._sigma = None
         self._table = table
+        self._h = float(np.linalg.norm(np.diff(table, axis=0), axis=1).max())
 
     def arc_length(self, theta: np.ndarray) -> np.ndarray:
         """Arc length [m] from the start of the points at ``theta``: chords of a table of
@@ -108,18 +109,56 @@ class PathCurve:
         memo = getattr(self, '_memo', None)
         if memo is not None and memo[0].shape == p.shape and np.array_equal(memo[0], p):
             return memo[1].copy()
-        _, j = self._tree.query(p)
+        self._ties = {}
+        t = self._project(p)
+        self._memo = (p.copy(), t.copy(), self._ties)
+        return t
+
+    def _project(self, p: np.ndarray, k: int = 8) -> np.ndarray:
+        """Newton from the nearest table point, and from every other table point that may
+        lie in the interval of the true nearest point: all within d_1 + h / 2 (d_1 the
+        nearest table point's distance, h the longest table chord; the true foot's interval
+        has an end within d* + h / 2 <= d_1 + h / 2). A path that passes close by itself (two
+        legs of a closed spline 0.19 mm apart) would otherwise put a point of one leg on the
+        other; the nearest of the Newton results is kept. On a closed path table point n is
+        point 0, so a point near the start also tries the last interval."""
+        last = self._th.size - 1
+        k = min(k, last + 1)
+        dist, idx = self._tree.query(p, k=k)
+        dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
+        reach = dist[:, 0] + 0.5 * self._h * (1 + 1e-9)
+        j = idx[:, 0]
         t = self._newton(p, j)
-        if self.closed:     # node 0 is node n: try the last interval too (those samples)
-            last = self._th.size - 1
-            ends = np.flatnonzero((j == 0) | (j == last))
-            if ends.size:
-                alt = np.where(j[ends] == 0, last, 0)
-                t2 = self._newton(p[ends], alt)
-                d1 = np.linalg.norm(self.point(t[ends]) - p[ends], axis=1)
-                d2 = np.linalg.norm(self.point(t2) - p[ends], axis=1)
-                t[ends] = np.where(d2 < d1, t2, t[ends])
-        self._memo = (p.copy(), t.copy())
+        best = np.linalg.norm(self.point(t) - p, axis=1)
+        rows = [np.flatnonzero((dist[:, c] <= reach) & (np.abs(idx[:, c] - j) > 1))
+                for c in range(1, k)]
+        cand = [idx[r, c] for c, r in enumerate(rows, start=1)]
+        if self.closed:
+            r = np.flatnonzero((j == 0) | (j == last))
+            rows.append(r)
+            cand.append(np.where(j[r] == 0, last, 0))
+        crowded = np.flatnonzero(dist[:, -1] <= reach) if k <= last else np.zeros(0, int)
+        if crowded.size:    # the k nearest all within reach: every table point in it
+            found = self._tree.query_ball_point(p[crowded], reach[crowded])
+            rows.append(np.repeat(crowded, [len(f) for f in found]))
+            cand.append(np.concatenate([np.asarray(f, int) for f in found]))
+        r, c = np.concatenate(rows), np.concatenate(cand)
+        if r.size:
+            tc = self._newton(p[r], c)
+            dc = np.linalg.norm(self.point(tc) - p[r], axis=1)
+            order = np.lexsort((dc, r))             # per point, its nearest result first
+            first = order[np.r_[True, r[order][1:] != r[order][:-1]]]
+            better = dc[first] < best[r[first]]
+            t[r[first][better]] = tc[first][better]
+            best[r[first][better]] = dc[first][better]
+            # where the path crosses itself a point can be on two legs at once: those
+            # within TIE_M of its nearest are kept for ``theta`` to choose by continuity
+            apart = np.abs(tc - t[r])
+            if self.closed:     # theta 0 and 2 pi are one point
+                apart = np.minimum(apart, 2 * np.pi - apart)
+            tie = np.flatnonzero((dc <= best[r] + self.TIE_M) & (apart > 1e-9))
+            for row in np.unique(r[tie]):
+                self._ties[int(row)] = tc[tie[r[tie] == row]]
         return t
 
     def _newton(self, p: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -142,14 +181,27 @@ class PathCurve:
                 break
         return t
 
+    #: [m] a point as close as this to two legs of a path that crosses itself is on either
+    TIE_M = 1e-6
+
     def deviation(self, p: np.ndarray) -> np.ndarray:
         """Distance [m] of points p (M, 3) from the path."""
         return np.linalg.norm(p - self.point(self._nearest(p)), axis=1)
 
     def theta(self, p: np.ndarray) -> np.ndarray:
         """theta (M,) [rad] of points along a sequence, from about 0 (unwrapped on a closed
-        path, so the sequence's last point of a full lap is at about 2 pi)."""
+        path, so the sequence's last point of a full lap is at about 2 pi). A point on two
+        legs at once (where the path crosses itself) takes the leg nearest in theta to the
+        point before it (the first: to theta 0)."""
         t = self._nearest(p)
+        ties = self._memo[2]
+        for r in sorted(ties):
+            prev = t[r - 1] if r else 0.0
+            options = np.append(ties[r], t[r])
+            gap = np.abs(options - prev)
+            if self.closed:
+                gap = np.minimum(gap, 2 * np.pi - gap)
+            t[r] = options[int(np.argmin(gap))]
         if not self.closed:
             return t
         t = np.unwrap(np.mod(t, 2 * np.pi))

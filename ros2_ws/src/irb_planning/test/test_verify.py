@@ -85,3 +85,39 @@ def test_map_friction_is_read_from_the_numbers():
     e = np.exp(-25.0)
     expected = [11 + 4 * e + 1.0 + 0.5, -(9 + 4 * e) - 1.0 + 0.5, 11 + 4 + 0.5]
     np.testing.assert_allclose(f(v)[:, 0], expected, rtol=1e-9, atol=1e-8)
+
+
+def test_the_check_projects_onto_the_right_leg_of_a_path_that_crosses_itself():
+    """A figure eight crosses itself at theta pi (its point at theta 0 and 2 pi): points run
+    through the crossing in order, exact points are on the path, and a point 0.1 mm off one
+    leg near the crossing is 0.1 mm off the path. Before, the check kept the nearest table
+    point's leg: bench_smooth's crossing spline was refused for points 0.035 mm off it."""
+    from irb_planning.verify import PathCurve
+
+    def point(t):
+        t = np.asarray(t, float)
+        return np.stack([0.6 + 0.2 * np.sin(t), 0.1 * np.sin(2 * t), 0.3 + 0 * t], axis=-1)
+
+    def d_point(t):
+        t = np.asarray(t, float)
+        return np.stack([0.2 * np.cos(t), 0.2 * np.cos(2 * t), 0 * t], axis=-1)
+
+    def dd_point(t):
+        t = np.asarray(t, float)
+        return np.stack([-0.2 * np.sin(t), -0.4 * np.sin(2 * t), 0 * t], axis=-1)
+
+    curve = PathCurve(point, d_point, dd_point, closed=True)
+    th = np.sort(np.append(np.linspace(0.0, 2 * np.pi, 4001), [np.pi]))
+    p = point(th)
+    assert curve.deviation(p).max() < 1e-12
+    got = curve.theta(p)
+    assert np.all(np.diff(got) >= 0)
+    np.testing.assert_allclose(got, th, atol=1e-9)
+    # near the crossing, off one leg along its normal (the other leg is about 0.2 mm away)
+    t0 = np.pi + 5e-4
+    tangent = d_point(t0) / np.linalg.norm(d_point(t0))
+    normal = np.cross([0.0, 0.0, 1.0], tangent)
+    off = point(np.array([t0])) + 1e-4 * normal
+    fine = np.linspace(0.0, 2 * np.pi, 2_000_001)
+    brute = np.linalg.norm(point(fine) - off, axis=1).min()
+    assert curve.deviation(off)[0] == pytest.approx(brute, abs=1e-9)
