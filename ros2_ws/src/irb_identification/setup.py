@@ -32,6 +32,7 @@ setup(
             'experiments = irb_identification.experiments:main',
             'discrepancy = irb_identification.discrepancy:main',
             'excite = irb_identification.excite:main',
+            'breakaway = irb_identification.breakaway_cli:main',
         ],
     },
 )

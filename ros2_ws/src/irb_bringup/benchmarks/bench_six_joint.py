@@ -50,6 +50,9 @@ def parse(argv):
                     help='also with an identified wrist: six-joint sweeps of joints 4-6 on '
                          'the offline simulator and their sample fit into DIR (the main '
                          "job's identify_wrist), joints 1-3 the plant's own map")
+    ap.add_argument('--breakaway', action='store_true',
+                    help='with --identified-wrist: also breakaway runs of joints 4-6 (a '
+                         'slow torque ramp from rest each way) for F_s and v_s')
     ap.add_argument('--modes', nargs='+', default=['file', 'nominal'],
                     choices=['file', 'nominal', 'identified'],
                     help="feed-forward maps: 'file' the plant's own, 'nominal', "
@@ -61,6 +64,8 @@ def parse(argv):
     a = ap.parse_args(argv)
     if 'identified' in a.modes and not a.identified_wrist:
         ap.error("--modes identified needs --identified-wrist DIR")
+    if a.breakaway and not a.identified_wrist:
+        ap.error('--breakaway needs --identified-wrist DIR')
     if a.identified_wrist and 'identified' not in a.modes:
         a.modes.append('identified')
     return a
@@ -143,7 +148,8 @@ def main(argv=None):
         from irb_bringup.six_axis_phase import identify_wrist, six_joint_ff_map
         wdir = Path(a.identified_wrist)
         wdir.mkdir(parents=True, exist_ok=True)
-        wrist_map, info = identify_wrist(wdir, [0.1, 0.3, 1.0, 2.0], 1.0, log=print)
+        wrist_map, info = identify_wrist(wdir, [0.1, 0.3, 1.0, 2.0], 1.0, log=print,
+                                         breakaway=a.breakaway)
         maps['identified'], label = six_joint_ff_map(
             default_plant_yaml(), wrist_map, wdir / 'ff_map.yaml',
             arm_label="the plant's own (config/plant.yaml)")

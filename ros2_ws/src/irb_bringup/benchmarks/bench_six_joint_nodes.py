@@ -59,6 +59,9 @@ def parse(argv):
     ap.add_argument('--speed', type=float, default=0.25, help='[m/s] --plan trapezoid')
     ap.add_argument('--friction', choices=('nominal', 'file'), default='nominal',
                     help="pdplus friction_mode ('file': config/plant.yaml, the plant's own)")
+    ap.add_argument('--friction-file', default='', help="with --friction file: this map of "
+                    "joints 1-6 ('' = config/plant.yaml), e.g. bench_six_joint.py "
+                    "--identified-wrist DIR's DIR/ff_map.yaml")
     ap.add_argument('--out', default='six_joint_nodes', help="results/<out>.json ('' = none)")
     return ap.parse_args(argv)
 
@@ -150,7 +153,8 @@ def _publish_plan(node, ex, points: dict, path_file: str, timeout: float) -> str
 
 def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
         start=START, timeout: float = 300.0, log=print, plain_pd: bool = False,
-        plan: str = 'energy', speed: float = 0.25, friction: str = 'nominal') -> dict:
+        plan: str = 'energy', speed: float = 0.25, friction: str = 'nominal',
+        friction_file: str = '') -> dict:
     """The sequence on the nodes (module docstring); the figures and how the run went."""
     import subprocess
     import tempfile
@@ -194,7 +198,7 @@ def run(path_file: str, duration: float, grid: int = 0, tcp_xyz=(0.0, 0.0, 0.1),
             merged.pop(k, None)
     if friction == 'file':
         merged['friction_mode'] = 'file'
-        merged['friction_map_file'] = str(config_path('plant.yaml'))
+        merged['friction_map_file'] = friction_file or str(config_path('plant.yaml'))
     out['pdplus_parameters'] = merged
     params = tempfile.NamedTemporaryFile('w', suffix='.yaml', delete=False)
     yaml.safe_dump({'/**': {'ros__parameters': merged}}, params)
@@ -304,11 +308,15 @@ def main(argv=None):
     if not a.path_file:
         from irb_planning.six_axis_plan import config_path
         a.path_file = str(config_path().parent / 'path6_rectangle.yaml')
+    if a.friction_file and (a.friction != 'file' or not Path(a.friction_file).is_file()):
+        print('bench_six_joint_nodes: --friction-file needs --friction file and an existing '
+              'map', file=sys.stderr)
+        return 2
     if not (0.0 < a.speed < 2.0):
         print('bench_six_joint_nodes: --speed must be in (0, 2) m/s', file=sys.stderr)
         return 2
     out = run(a.path_file, a.duration, a.grid, a.tcp, a.start, a.timeout, plain_pd=a.plain_pd,
-              plan=a.plan, speed=a.speed, friction=a.friction)
+              plan=a.plan, speed=a.speed, friction=a.friction, friction_file=a.friction_file)
     print(json.dumps(out, indent=1))
     if a.out:
         RESULTS.mkdir(exist_ok=True)

@@ -49,6 +49,8 @@ def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, o
     label for the report)."""
     from dataclasses import replace
 
+    import yaml
+
     from irb_description.friction import FrictionMap, load_friction_map
     from irb_description.six_axis_model import nominal_six_joint_friction
     nominal = nominal_six_joint_friction()
@@ -67,7 +69,11 @@ def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, o
         wrist = load_friction_map(wrist_map, names[3:])
         joints[3:] = [replace(j, polynomial_positive=None, polynomial_negative=None)
                       for j in wrist.joints]
-        parts.append('joints 4-6 identified (six-joint sweeps, sample fit)')
+        raw = yaml.safe_load(Path(wrist_map).read_text())['friction_map']['joints']
+        how = ('six-joint sweeps, sample fit; breakaway F_s, v_s' if any(
+            'breakaway' in (raw.get(n) or {}) for n in names[3:]) else
+            'six-joint sweeps, sample fit')
+        parts.append(f'joints 4-6 identified ({how})')
     else:
         parts.append('joints 4-6 nominal wrist_friction (an assumption; plant +20/-15/+25 %)')
     label = ', '.join(parts)
@@ -75,10 +81,12 @@ def six_joint_ff_map(arm_map: str | Path | None, wrist_map: str | Path | None, o
     return out, label
 
 
-def identify_wrist(out_dir: Path, speeds, hold_s: float, log=print) -> tuple[Path, dict]:
+def identify_wrist(out_dir: Path, speeds, hold_s: float, log=print,
+                   breakaway: bool = False) -> tuple[Path, dict]:
     """Wrist sweeps on the six-joint simulator and their sample fit (irb_identification
-    six_joint.py, identify --joints joint_4,joint_5,joint_6 --method samples): (map path,
-    the fit's figures against the plant's true wrist friction)."""
+    six_joint.py, identify --joints joint_4,joint_5,joint_6 --method samples), and with
+    ``breakaway`` the breakaway runs' F_s and v_s in the map (``six_joint.add_breakaway``):
+    (map path, the fit's figures against the plant's true wrist friction)."""
     from irb_identification import identify
     from irb_identification.offline_sim import SimConfig
     from irb_identification.six_joint import (WRIST_JOINTS, plant_friction_map,
@@ -97,16 +105,25 @@ def identify_wrist(out_dir: Path, speeds, hold_s: float, log=print) -> tuple[Pat
     if rc != 0:
         raise RuntimeError(f'wrist identification failed (identify exit {rc}, '
                            f'{out_dir / "wrist_identify.json"})')
+    extra = {}
+    if breakaway:
+        from irb_identification.six_joint import add_breakaway
+        extra['breakaway'] = add_breakaway(
+            path, list(WRIST_JOINTS), SimConfig(velocity_noise=0.002, effort_noise=0.05,
+                                                seed=3), log=log)
     from irb_description.friction import load_friction_map
     got = load_friction_map(path, list(WRIST_JOINTS))
     truth = plant_friction_map()
-    rows = {n: {'coulomb': g.coulomb, 'viscous': g.viscous,
-                'coulomb_true': t.coulomb, 'viscous_true': t.viscous}
+    rows = {n: {'coulomb': g.coulomb, 'viscous': g.viscous, 'static': g.static,
+                'stribeck_velocity': g.stribeck_velocity,
+                'coulomb_true': t.coulomb, 'viscous_true': t.viscous, 'static_true': t.static,
+                'stribeck_velocity_true': t.stribeck_velocity}
             for n, g, t in zip(WRIST_JOINTS, got.joints, truth.joints[3:])}
     log(f'   wrist identified from {len(bags)} sweeps in {time.monotonic() - t0:.0f} s: '
         + ', '.join(f'{n} F_c {r["coulomb"]:.3f} (plant {r["coulomb_true"]:.3f}) N m'
                     for n, r in rows.items()))
-    return path, {'bags': len(bags), 'joints': rows, 'wall_time_s': time.monotonic() - t0}
+    return path, {'bags': len(bags), 'joints': rows, 'wall_time_s': time.monotonic() - t0,
+                  **extra}
 
 
 def run_six_axis_rectangle(block: dict, rect: dict, out: Path, ff_file: Path, ff_label: str,

@@ -4,7 +4,8 @@ Plain class, no ROS imports. The joint count n is the model's: 3 with ``RobotMod
 1-3 actuated, 4-6 locked: the thesis's model, today's simulator, hand-unrolled below) or 6 with
 ``irb_description.six_axis_model.SixJointModel`` (the whole arm, issue 30: the same equations
 on n-vectors in ``_substep_n``). One call of ``Plant.step`` advances one controller period
-``period_s`` (0.004032 s) in ``substeps`` equal substeps (default 5, h = 0.806 ms) of semi-implicit Euler::
+``period_s`` (0.004032 s) in ``substeps`` equal substeps of semi-implicit Euler (default
+``DEFAULT_SUBSTEPS``: 5 for three joints, h = 0.806 ms; 10 for six, h = 0.403 ms)::
 
     v+ = v + h M(q)^-1 (tau - C(q, v) v - g(q) - F_v v - lambda)
     q+ = q + h v+
@@ -48,7 +49,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -136,13 +137,22 @@ def config_path(name: str) -> Path:
     return Path(get_package_share_directory('irb_control')) / 'config' / name
 
 
+#: substeps per period by joint count when PlantConfig.substeps is 0. Three joints: 5, the
+#: thesis plant (its runs reproduce bit for bit). Six: 10, because the Stribeck level is
+#: taken at the substep's old speed: joint 6 (M_66 = 0.025 kg m^2, its dip's slope up to 6.7
+#: N m s/rad) breaking away at h = 0.806 ms left the continuous model by 0.4 mrad within 60
+#: ms (h |dF/dv| / M = 0.21), and a v_s fitted to that motion came out 0.050 for 0.040 rad/s;
+#: at h = 0.403 ms 0.03 mrad (irb_identification breakaway.py, doc/simulator.md).
+DEFAULT_SUBSTEPS = {3: 5, 6: 10}
+
+
 @dataclass(frozen=True)
 class PlantConfig:
     """Plant settings (SI units). Arrays are (n,) over the model's joints (initial_q's
     default is the thesis's three-axis pose: six joints need their own)."""
 
     period_s: float = PERIOD_S
-    substeps: int = 5
+    substeps: int = 0                    # 0: DEFAULT_SUBSTEPS of the model's joint count
     delay_samples: int = 3
     initial_q: tuple = (0.0, 0.90, 0.25)
     command_timeout_s: float = 0.0121    # 3 periods, as the axis computer's miss limit
@@ -157,8 +167,9 @@ class PlantConfig:
     brake_release_s: float = 0.0          # torque acts this long on the closed brake first
 
     def __post_init__(self):
-        if not (self.period_s > 0 and self.substeps >= 1 and self.delay_samples >= 1):
-            raise ValueError('period_s > 0, substeps >= 1 and delay_samples >= 1 required')
+        if not (self.period_s > 0 and self.substeps >= 0 and self.delay_samples >= 1):
+            raise ValueError('period_s > 0, substeps >= 0 (0: the default of the joint '
+                             'count) and delay_samples >= 1 required')
         vals = [self.command_timeout_s, self.encoder_resolution_rad, self.position_noise_rad,
                 self.velocity_noise_rad_s, self.camera_period_s, self.camera_noise_m,
                 *self.initial_q]
@@ -201,6 +212,9 @@ class Plant:
         self._pm = self.model.model
         self.n = n = int(self._pm.nq)          # joints: 3 (thesis) or 6 (the whole arm)
         self.effects = effects or PlantEffects()
+        if config.substeps == 0:
+            config = replace(config, substeps=DEFAULT_SUBSTEPS.get(n, max(
+                DEFAULT_SUBSTEPS.values())))
         if n != 3 and self.effects:
             raise ValueError(f'plant effects are modelled for the three-axis plant only, not '
                              f'{n} joints')

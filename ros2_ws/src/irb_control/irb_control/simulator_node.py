@@ -70,7 +70,8 @@ SPEC = NodeSpec(
         Param('tcp_xyz', [0.0, 0.0, 0.0], 'm', 'joints 6: the TCP in tool0 the camera sees '
               '(e.g. [0, 0, 0.1], the gluing nozzle)'),
         Param('period_s', _d.period_s, 's', 'sample period'),
-        Param('substeps', _d.substeps, '', 'integration substeps per period'),
+        Param('substeps', _d.substeps, '', 'integration substeps per period; 0: 5 with '
+              'joints 3 (the thesis plant), 10 with joints 6 (plant.DEFAULT_SUBSTEPS)'),
         Param('delay_samples', _d.delay_samples, 'samples', 'command-to-effect delay'),
         Param('initial_positions', list(_d.initial_q), 'rad', 'start pose of joints 1-3 '
               '(brakes on); joints 6: six values, or three with the wrist at 0'),
@@ -214,7 +215,8 @@ class SimulatorNode(Node):
         self.max_missed_run = 0
         self.t_wall0 = time.monotonic()
         self.get_logger().info(
-            f"simulator: {self.mode}, T = {p['period_s']} s, {p['substeps']} substeps, delay "
+            f"simulator: {self.mode}, T = {p['period_s']} s, "
+            f"{self.plant.config.substeps} substeps, delay "
             f"{p['delay_samples']} samples, plant friction {ffile}, effects "
             f"{effects.names() or 'none'}")
 

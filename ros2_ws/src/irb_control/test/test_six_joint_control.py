@@ -151,6 +151,11 @@ def test_six_joint_plant_basics(six, model):
     _, pf = load_plant_friction(default_plant_yaml(), six.joint_names)
     q0 = np.array([0.0, 0.6, 0.2, 0.3, -0.5, 0.4])
     p = Plant(six, pf, PlantConfig(initial_q=tuple(q0)))
+    # substeps 0 (the default): 10 with six joints, 5 with three (the thesis plant)
+    assert p.config.substeps == 10 and p._h == pytest.approx(PlantConfig().period_s / 10)
+    _, pf3 = load_plant_friction(default_plant_yaml(), model.joint_names)
+    assert Plant(model, pf3, PlantConfig()).config.substeps == 5
+    assert Plant(six, pf, PlantConfig(initial_q=tuple(q0), substeps=5)).config.substeps == 5
     p.command(np.zeros(3))                      # three torques for six joints: refused
     assert 'rejected invalid command' in p.events[-1][1]
     g = p.model.model

@@ -22,6 +22,7 @@ control only for the plant used in simulation).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -191,3 +192,154 @@ def run_six_joint_experiments(joints: list[str], speeds: list[float], out_dir: P
             start_ns += int(round((run.t[-1] + 1.0) * 1e9))
             log(f'{bag}: {prof.duration:.1f} s, {len(run.t)} samples (six-joint plant)')
     return bags
+
+
+def simulate_breakaway(model: SixJointModel, friction, joint: int, q0: np.ndarray,
+                       direction: int, rate_nm_s: float = 0.1, travel_rad: float = 0.02,
+                       config: SimConfig = SimConfig(), settle_s: float = 0.5,
+                       max_torque_nm: float | None = None, after_s: float = 0.5,
+                       preload_nm: float = 0.0) -> dict:
+    """A breakaway run (``breakaway.py``) on ``joint`` (0..5) of the six-joint simulator:
+    the PD+ (config/pdplus_six_axis.yaml, time-driven, holding q0) holds every joint;
+    after ``settle_s`` the joint's command is replaced by its model static load g_j(q0) +
+    direction (``preload_nm`` + rate (t - t_start)) until it has moved ``travel_rad`` (then
+    the PD+ takes it back and holds it for ``after_s``); a preload below F_c (e.g. 0.9 x the
+    sweeps' Coulomb level) shortens the ramp. Logged per control period as ``simulate_six`` logs
+    (encoder sample, applied torque + ``config.effort_noise``). Returns the mapping
+    ``breakaway.fit_breakaway`` reads (t, q, tau of the joint, ramp_start, release,
+    direction) plus q_all / tau_all (N, 6). RuntimeError (one line) if the joint has not
+    moved at ``max_torque_nm`` beyond g_j (default: 4 x its nominal static friction)."""
+    from irb_control.closed_loop import six_axis_controller_config
+    from irb_control.pd_plus import PdPlusController
+    from irb_control.plant import Plant, PlantConfig, PlantFriction
+    from irb_control.profiles import TimeTrajectory
+    from irb_description.path import thesis_circle
+    from irb_description.six_axis_model import nominal_six_joint_friction
+
+    q0 = np.asarray(q0, float)
+    period = config.period_s
+    nominal = nominal_six_joint_friction()
+    cap = max_torque_nm or 4.0 * nominal.joints[joint].static
+    longest = settle_s + max(cap - preload_nm, 0.0) / rate_nm_s + after_s + 1.0
+    n_ref = int(np.ceil(longest / period)) + 10
+    t_ref = np.arange(n_ref) * period
+    hold = np.repeat(q0[None, :], n_ref, axis=0)
+    plant = Plant(model, PlantFriction.from_map(friction),
+                  PlantConfig(period_s=period, initial_q=tuple(q0.tolist()),
+                              velocity_noise_rad_s=config.velocity_noise, seed=config.seed))
+    # holding at rest: no friction feed-forward (config/pdplus_six_axis.yaml's wrist
+    # Stribeck term on the measured speed kicks a held wrist joint by its hump at every
+    # sign change of the encoder noise, and the arm then creeps under the experiment)
+    ctrl = PdPlusController(model, thesis_circle(),
+                            six_axis_controller_config(stiction_prediction=False,
+                                                       stribeck_measured=None),
+                            nominal.scaled(0.0))
+    ctrl.set_time_trajectory(TimeTrajectory(t_ref, hold, np.zeros_like(hold),
+                                            np.zeros_like(hold)))
+    ctrl.enable()
+    g = float(model.inverse_dynamics(q0, np.zeros(6), np.zeros(6))[joint])
+    rng = np.random.default_rng(config.seed + 1)
+    t0 = None
+    ramp_start = release = None
+    log_t, log_q, log_tau = [], [], []
+    for _ in range(n_ref + int(2.0 / period)):
+        y = plant.measure()
+        if t0 is None:
+            t0 = y.t
+        s = y.t - t0
+        out = ctrl.step(y.t, y.q, y.qd)
+        tau = np.array(out.tau, float)
+        if release is None and s >= settle_s:
+            if ramp_start is None:
+                ramp_start = y.t
+            push = preload_nm + rate_nm_s * (y.t - ramp_start)
+            if push > cap:
+                raise RuntimeError(f'{model.joint_names[joint]}: no breakaway up to '
+                                   f'{cap:.2f} N m beyond its static load (direction '
+                                   f'{direction:+d})')
+            if abs(y.q[joint] - q0[joint]) >= travel_rad:
+                release = y.t
+            else:
+                tau[joint] = g + direction * push
+        if out.publish:
+            plant.command(tau)
+        log_t.append(y.t)
+        log_q.append(y.q)
+        log_tau.append(y.tau)
+        plant.step()
+        if ctrl.stop_reason:
+            raise RuntimeError(f'{model.joint_names[joint]}: the holding controller stopped '
+                               f'at {s:.3f} s: {ctrl.stop_reason}')
+        if release is not None and y.t - release >= after_s:
+            break
+    tau_all = np.asarray(log_tau)
+    if config.effort_noise > 0:
+        tau_all = tau_all + config.effort_noise * rng.standard_normal(tau_all.shape)
+    q_all = np.asarray(log_q)
+    return {'t': np.asarray(log_t), 'q': q_all[:, joint], 'tau': tau_all[:, joint],
+            'ramp_start': float(ramp_start), 'release': float(release),
+            'direction': int(direction), 'q_all': q_all, 'tau_all': tau_all, 'joint': joint}
+
+
+def add_breakaway(map_path: str | Path, joints, config: SimConfig = SimConfig(),
+                  rate_nm_s: float = 0.1, pairs: int = 3, center=(0.0, 0.5, -0.8),
+                  friction=None, model: SixJointModel | None = None, log=print,
+                  out_path: str | Path | None = None) -> dict:
+    """Breakaway runs (``simulate_breakaway``: ``pairs`` runs per direction, each with its
+    own noise seed, preloaded to 0.9 x the map's Coulomb level, then ``rate_nm_s``) of
+    ``joints`` on the six-joint simulator and their fit (``breakaway.fit_breakaway`` with
+    F_c, F_v of the map at ``map_path``, M_jj of the model at the pose): the map's ``static``
+    and ``stribeck_velocity`` of those joints are replaced by the fitted F_s and v_s (a
+    ``breakaway`` block per joint says so), written to ``out_path`` (default: ``map_path``)
+    once every joint is fitted. Returns {joint: figures}. KeyError / ValueError (the map),
+    BreakawayError (a fit), RuntimeError (a run) say why in one line."""
+    import yaml
+
+    from .breakaway import fit_breakaway
+    model = model or SixJointIdentificationModel()
+    friction = friction or plant_friction_map(joint_names=model.joint_names)
+    q0 = six_joint_center(center)
+    path = Path(map_path)
+    data = yaml.safe_load(path.read_text())
+    try:
+        entries = data['friction_map']['joints']
+    except (KeyError, TypeError):
+        raise ValueError(f'{path}: not a friction map (no friction_map.joints)') from None
+    out = {}
+    for name in joints:
+        if name not in model.joint_names:
+            raise ValueError(f'unknown joint {name!r}, expected one of {model.joint_names}')
+        if name not in entries or not all(k in entries[name] for k in ('coulomb', 'viscous')):
+            raise ValueError(f'{path}: no coulomb and viscous of {name} (identify it first: '
+                             'the breakaway fit takes F_c and F_v from the sweeps)')
+        j = model.joint_names.index(name)
+        e = entries[name]
+        runs = []
+        for i in range(pairs):
+            for d in (1, -1):
+                cfg = replace(config, seed=config.seed + 2 * i + (d < 0))
+                runs.append(simulate_breakaway(model, friction, j, q0, d, rate_nm_s,
+                                               config=cfg,
+                                               preload_nm=0.9 * float(e['coulomb'])))
+        inertia = float(model.mass_matrix(q0)[j, j]) if hasattr(model, 'mass_matrix') else \
+            float(SixJointIdentificationModel().mass_matrix(q0)[j, j])
+        fit = fit_breakaway(runs, inertia, float(e['coulomb']), float(e['viscous']))
+        e['static'] = fit.static
+        e['stribeck_velocity'] = fit.stribeck_velocity
+        for k in ('static_positive', 'static_negative'):
+            e.pop(k, None)
+        figs = {'static': fit.static, 'static_spread': fit.static_spread,
+                'stribeck_velocity': fit.stribeck_velocity,
+                'stribeck_velocity_spread': fit.stribeck_velocity_spread,
+                'static_load_nm': fit.load, 'coulomb_of_the_fit': fit.coulomb,
+                'position_rms_rad': fit.position_rms,
+                'pairs': fit.pairs, 'rate_nm_s': rate_nm_s, 'inertia_kg_m2': inertia,
+                'pose_rad': [float(x) for x in q0]}
+        e['breakaway'] = figs
+        out[name] = figs
+        log(f'   {name} breakaway ({fit.pairs} pairs): F_s {fit.static:.4f} '
+            f'± {fit.static_spread:.4f} N m, v_s {fit.stribeck_velocity:.4f} ± '
+            f'{fit.stribeck_velocity_spread:.4f} rad/s (worst position fit RMS '
+            f'{fit.position_rms * 1e3:.3f} mrad)')
+    Path(out_path or path).write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
