@@ -109,6 +109,15 @@ def test_refusal_without_certificate_says_it_is_not_proven(model, map_dir):
     assert 'a finer grid_size (e.g. 214) may plan it' in msg
 
 
+def played_tcp(model, tr: dict, rate: float) -> np.ndarray:
+    """The TCP (M, 3) of a plan's message played by quintic interpolation (test/played.py)
+    on its clock's ticks at ``rate`` [Hz] (forward kinematics of the model)."""
+    p = played.play(model, tr['t'], tr['q'], tr['qd'], tr['qdd'], rate=rate, stride=10 ** 9)
+    ticks = (p.t - p.t[0]) * rate
+    on = np.abs(ticks - np.round(ticks)) < 1e-6
+    return np.array([model.fk(q) for q in p.q[on]])
+
+
 @pytest.mark.parametrize('case', [CASE7, CASE8], ids=['case7', 'case8'])
 def test_case_refused_before_plans_within_the_limits_as_played(model, case):
     """Cases 7 and 8 at grid 200 (refused before at every grid; 8: the stencils and the TCP
@@ -117,12 +126,8 @@ def test_case_refused_before_plans_within_the_limits_as_played(model, case):
     difference) within the limit, the speed within the band."""
     pl = Planner(model.copy(), PlannerSettings(grid_size=200, cache_size=1, limit_cost=False))
     res = pl.plan(case)
-    tr = res.trajectory
     rate = 10000.0
-    p = played.play(model, tr['t'], tr['q'], tr['qd'], tr['qdd'], rate=rate, stride=10 ** 9)
-    ticks = (p.t - p.t[0]) * rate
-    on = np.abs(ticks - np.round(ticks)) < 1e-6
-    x = np.array([model.fk(q) for q in p.q[on]])
+    x = played_tcp(model, res.trajectory, rate)
     jerk = np.linalg.norm(np.diff(x, n=3, axis=0), axis=1) * rate ** 3
     speed = np.linalg.norm(np.diff(x, axis=0), axis=1) * rate
     assert jerk.max() <= 100.0 * (1 + LIMIT_RTOL)
@@ -167,12 +172,8 @@ def test_a_closed_spline_that_crosses_itself_plans_within_the_limits_as_played(m
     res = pl.plan(PlanRequest(path_type='spline', waypoints=CROSSING, closed=True,
                               boundary='periodic', objective='time'))
     assert res.verification.ok, res.verification.problems
-    tr = res.trajectory
     rate = 10000.0
-    p = played.play(model, tr['t'], tr['q'], tr['qd'], tr['qdd'], rate=rate, stride=10 ** 9)
-    ticks = (p.t - p.t[0]) * rate
-    on = np.abs(ticks - np.round(ticks)) < 1e-6
-    x = np.array([model.fk(q) for q in p.q[on]])
+    x = played_tcp(model, res.trajectory, rate)
     path = SplinePath(CROSSING, closed=True)
     assert path.distance(x).max() <= 1e-4
     jerk = np.linalg.norm(np.diff(x, n=3, axis=0), axis=1) * rate ** 3
