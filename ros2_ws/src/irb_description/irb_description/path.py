@@ -98,8 +98,13 @@ class PathBase:
             first = order[np.r_[True, r[order][1:] != r[order][:-1]]]
             better = dc[first] < best[r[first]]
             out[r[first][better]] = tc[first][better]
-        if self.closed:
-            out = np.where(out >= TWO_PI, out - TWO_PI, out)
+        # the ends exactly: within 1e-12 rad (~1e-13 m) of 0 or 2 pi is the end (Newton on
+        # an end point itself stops a few ulp from it, and a ramp's speed floor, zero at the
+        # end, is then a few 1e-11 m/s above a played speed of exactly 0); on a closed path
+        # 2 pi is 0
+        out = np.where(out <= 1e-12, 0.0, out)
+        end = out >= TWO_PI - 1e-12
+        out = np.where(end, 0.0 if self.closed else TWO_PI, out)
         return out.reshape(p.shape[:-1])
 
     def distance(self, p: np.ndarray) -> np.ndarray:

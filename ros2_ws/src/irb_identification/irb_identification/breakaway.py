@@ -3,8 +3,8 @@
 The sweeps of eq. 4.1 hold speeds of 0.1 rad/s and more; the wrist's Stribeck velocities are
 0.03-0.07 rad/s, so the sweeps see no hump (F_s = F_c is all a fit of them can say), and the
 sweep controller stick-slips at creep speeds. A breakaway run starts at rest with the other
-joints held: the joint's torque rises slowly, ``rate`` [N m/s], from its holding torque,
-until the joint moves ``travel`` [rad]. While it sticks, friction takes the whole ramp; the
+joints held: the joint's torque rises slowly, ``rate`` [N m/s], from its holding torque (or
+a preload below F_c), until the joint moves ``travel`` [rad]. While it sticks, friction takes the whole ramp; the
 torque at which it starts is g + F_s (g the static load). Once it slides, M q'' = tau - g -
 F(q'), and its first tenths of a second pass through the Stribeck region.
 
@@ -32,8 +32,11 @@ FIT_WINDOW_S = 0.25
 RAMP_SKIP_S = 0.05
 #: [s] of the logged position before the detected departure the fit compares as well
 REST_LEAD_S = 0.1
-#: [rad] largest position RMS of a pair's fit that is accepted (200 x the encoder's noise:
-#: joint 6 with the sweeps' F_c 0.4 % high fits to 0.05 mrad; a 0.806 ms simulator step 0.4)
+#: model evaluations per start of a pair's least squares (a good pair converges in 10-30; a
+#: run the model does not describe would otherwise spend minutes finding that out)
+MAX_EVALUATIONS = 60
+#: [rad] largest position RMS of a pair's fit that is accepted (200 x the encoder's noise;
+#: the six-joint simulator's runs fit to 0.001-0.003 mrad, at a 0.806 ms step to 0.4)
 MAX_POSITION_RMS_RAD = 2e-4
 
 
@@ -125,7 +128,7 @@ def _simulate(t: np.ndarray, q0: float, a: float, b: float, g: float, inertia: f
         return [v, (a + b * s - g - f) / inertia]
 
     sol = solve_ivp(rhs, (t_go, t[-1]), [q0, 0.0], t_eval=t[moving], method='LSODA',
-                    rtol=1e-9, atol=1e-13, max_step=1e-3)
+                    rtol=1e-8, atol=1e-12, max_step=1e-3)
     if not sol.success or sol.y.shape[1] != moving.sum():
         return np.full(t.size, np.nan)
     q[moving] = sol.y[0]
@@ -175,7 +178,8 @@ def _fit_pair(pair, inertia: float, coulomb: float, viscous: float, window_s: fl
                                      0.9 * coulomb],
                                     [2.0 * static, load + 0.5 * (static - coulomb),
                                      np.log(0.5), min(1.1 * coulomb, static)]),
-                            x_scale=[0.01, 0.01, 0.1, 0.01], xtol=1e-10, ftol=1e-12)
+                            x_scale=[0.01, 0.01, 0.1, 0.01], xtol=1e-8, ftol=1e-10,
+                            max_nfev=MAX_EVALUATIONS)
         if best is None or sol.cost < best.cost:
             best = sol
         if np.sqrt(2.0 * best.cost / best.fun.size) <= good_rms:
