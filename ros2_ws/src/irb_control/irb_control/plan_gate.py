@@ -10,9 +10,10 @@ to the plan topic with its own DDS participant, decodes, converts (trajectory_io
 (plan_checks: size, consistency, limits, feed-forward torque) and writes each outcome to its
 stdout as one length-prefixed pickle: ``{'ok': True, 'kind': 'path'|'time', 'arrays': {...},
 'summary': {...}}`` (plus ``'path'`` and ``'tracker'`` objects when the plan carries the path
-it was planned on: irb_description.plan_path) or ``{'ok': False, 'reason': str}``. pdplus reads them on a thread of its
-own (a blocking read: no interpreter lock held while waiting), builds the (bounded) profile
-and offers it to the controller, which keeps it pending until enable.
+it was planned on: irb_description.plan_path) or ``{'ok': False, 'reason': str}``. pdplus
+reads them on a thread of its own (a blocking read: no interpreter lock held while waiting),
+builds the (bounded) profile and offers it to the controller, which keeps it pending until
+enable.
 
 The child ends when pdplus ends: its stdin is a pipe from pdplus (EOF -> exit) and, on Linux,
 PR_SET_PDEATHSIG delivers SIGTERM if pdplus dies. It runs at a lower priority (nice 10).

@@ -4,9 +4,10 @@ The sweeps of eq. 4.1 hold speeds of 0.1 rad/s and more; the wrist's Stribeck ve
 0.03-0.07 rad/s, so the sweeps see no hump (F_s = F_c is all a fit of them can say), and the
 sweep controller stick-slips at creep speeds. A breakaway run starts at rest with the other
 joints held: the joint's torque rises slowly, ``rate`` [N m/s], from its holding torque (or
-a preload below F_c), until the joint moves ``travel`` [rad]. While it sticks, friction takes the whole ramp; the
-torque at which it starts is g + F_s (g the static load). Once it slides, M q'' = tau - g -
-F(q'), and its first tenths of a second pass through the Stribeck region.
+a preload below F_c), until the joint moves ``travel`` [rad]. While it sticks, friction
+takes the whole ramp; the torque at which it starts is g + F_s (g the static load). Once it
+slides, M q'' = tau - g - F(q'), and its first tenths of a second pass through the Stribeck
+region.
 
 ``fit_breakaway`` (numpy/scipy, no ROS): per run the departure (the last sample within
 ``rest_band`` of the rest position) and the torque there from a straight line fitted to the
